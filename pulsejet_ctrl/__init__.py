@@ -1,0 +1,1 @@
+"""Actuation routines and the controller node."""

@@ -1,0 +1,1 @@
+"""pulsejet simulator."""
