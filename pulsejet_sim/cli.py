@@ -1,2 +1,61 @@
-def main():
-    print("stub")
+"""`pulsejet`: offline tools. `pulsejet run SCENE`, `pulsejet summary FILE.mcap`, `pulsejet plot FILE.mcap`,
+`pulsejet scenes`."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+
+def _run(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog='pulsejet run', description='Run a scene offline (no DDS) and record it to MCAP.')
+    parser.add_argument('scene', help='scene name under config/ or a YAML path')
+    parser.add_argument('--duration', type=float, default=None, help='simulated seconds (default: the scene\'s)')
+    parser.add_argument('--out', default=None, help='output MCAP (default: runs/<scene>-<time>.mcap)')
+    parser.add_argument('--dt', type=float, default=None, help='physics step in s (overrides the scene)')
+    parser.add_argument('--no-plot', action='store_true', help='do not write the PNG plot')
+    args = parser.parse_args(argv)
+    from pulsejet_sim import analysis
+    from pulsejet_sim.runner import default_output, run_scene
+    from pulsejet_sim.scene import SceneError, load_scene
+    try:
+        overrides = {'simulation': {'dt_s': args.dt}} if args.dt is not None else None
+        scene = load_scene(args.scene, overrides)
+        out = args.out or default_output(scene)
+        wall = time.perf_counter()
+        result = run_scene(scene, args.duration, out)
+        wall = time.perf_counter() - wall
+    except (SceneError, ValueError) as err:
+        print(f'pulsejet run: {err}', file=sys.stderr)
+        return 2
+    sim_s = result.sim.time_s
+    print(f'{scene.name}: {sim_s:.3f} s simulated in {wall:.3f} s wall ({sim_s / max(wall, 1e-9):.1f}x real time) -> {out}')
+    if result.fault:
+        print(f'pulsejet run: FAULT: {result.fault}', file=sys.stderr)
+    print(analysis.format_summary(analysis.summarize(out)))
+    if not args.no_plot:
+        print(f'plot: {analysis.plot(out)}')
+    return 1 if result.fault else 0
+
+
+def _scenes(argv: list[str]) -> int:
+    from pulsejet_sim.scene import available_scenes
+    print('\n'.join(available_scenes()))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    from pulsejet_sim import analysis
+    commands = {'run': _run, 'summary': analysis.main_summary, 'plot': analysis.main_plot, 'scenes': _scenes}
+    if not argv or argv[0] in ('-h', '--help') or argv[0] not in commands:
+        if argv and argv[0] not in ('-h', '--help'):
+            print(f'pulsejet: unknown command {argv[0]!r}; allowed: {", ".join(commands)}', file=sys.stderr)
+        print('usage: pulsejet {run SCENE [--duration S] [--out FILE.mcap] | summary FILE.mcap | '
+              'plot FILE.mcap [--out PNG] | scenes}', file=sys.stderr)
+        return 0 if argv and argv[0] in ('-h', '--help') else 2
+    return int(commands[argv[0]](argv[1:]) or 0)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,75 @@
+"""Types shared by every model: commands in, observations out, and the errors. No ROS here."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+
+class ModelError(ValueError):
+    """A model or scene parameter that cannot be simulated (names the value and what is allowed)."""
+
+
+class SimulationBlowUp(RuntimeError):
+    """The state became non-finite or left its physical bounds; the physics stopped at the last good step."""
+
+    def __init__(self, message: str, time_s: float):
+        super().__init__(message)
+        self.time_s = time_s
+
+
+class CommandError(ValueError):
+    """A command value outside what the actuator accepts."""
+
+
+@dataclass(frozen=True)
+class Command:
+    """Actuation command held constant over a batch of physics steps."""
+
+    pump_flow_m3_s: float = 0.0   # volume flow the pump pushes into the cavity through the bow inlet
+    valve_opening: float = 1.0    # 0 shut .. 1 fully open stern nozzle
+    cable_force_n: float = 0.0    # cable pull on the mantle (shell model); the lumped model ignores it
+
+    # allowed ranges, checked by validate(): (low, high)
+    LIMITS = {
+        'pump_flow_m3_s': (0.0, 0.05),
+        'valve_opening': (0.0, 1.0),
+        'cable_force_n': (0.0, 1000.0),
+    }
+
+    def validate(self) -> 'Command':
+        for f in fields(self):
+            value = getattr(self, f.name)
+            low, high = self.LIMITS[f.name]
+            check_command_value(f.name, value, low, high)
+        return self
+
+
+def check_command_value(name: str, value: float, low: float, high: float) -> float:
+    """Return value as float, or raise CommandError naming the value and the allowed range."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CommandError(f'{name}={value!r} is not a number; allowed: a finite value in [{low}, {high}]') from None
+    if not math.isfinite(v) or v < low or v > high:
+        raise CommandError(f'{name}={value!r} rejected; allowed: a finite value in [{low}, {high}]')
+    return v
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What the simulator publishes at one instant (SI units)."""
+
+    time_s: float
+    position_m: float            # vehicle axial position, forward +
+    velocity_m_s: float
+    acceleration_m_s2: float
+    mantle_radius_m: float       # largest mantle radius (lumped model: minor semi-axis b)
+    volume_m3: float             # fluid volume in the cavity
+    fluid_mass_kg: float
+    thrust_n: float              # jet momentum thrust on the vehicle, forward +
+    added_mass_force_n: float    # -dm_x/dt * U, forward +
+    drag_n: float                # drag on the vehicle, forward + (negative while swimming forward)
+    jet_speed_m_s: float         # outflow speed relative to the nozzle (negative while water flows in)
+    cavity_pressure_pa: float    # gauge pressure at the nozzle inlet
+    pump_flow_m3_s: float        # actual pump flow (the pump has a spin-up lag)
+    valve_opening: float         # actual valve opening (the valve has a stroke lag)

@@ -1,0 +1,278 @@
+"""Lumped pulsed-jet model (paper 001): immutable parameters compiled from a scene, plus the
+Model-protocol methods that drive the numba kernels in ``lumped_kernels``.
+
+The derivation, the choices where the paper is ambiguous and the energy ledger are in
+``docs/PHYSICS_LUMPED.md``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+from scipy import integrate
+
+from pulsejet_sim.models import lumped_kernels as K
+from pulsejet_sim.models.base import Command, ModelError, Observation, SimulationBlowUp
+from pulsejet_sim.schema import Choice, Flag, Number, check_section
+
+TERM_BITS = {
+    'shell_inertia': K.T_SHELL_INERTIA,
+    'internal_added_mass': K.T_INTERNAL_ADDED_MASS,
+    'nozzle_inertia': K.T_NOZZLE_INERTIA,
+    'viscous_loss': K.T_VISCOUS_LOSS,
+    'fluid_stiffness': K.T_FLUID_STIFFNESS,
+    'added_mass': K.T_ADDED_MASS,
+    'added_mass_variation': K.T_ADDED_MASS_VARIATION,
+    'fluid_mass': K.T_FLUID_MASS,
+    'drag': K.T_DRAG,
+    'jet_thrust': K.T_JET_THRUST,
+}
+
+SIMULATION_SPEC = {
+    'dt_s': Number(1e-4, 1e-7, 1e-2, low_open=False, unit='s'),
+    'duration_s': Number(10.0, 0.0, 1e6, low_open=True, unit='s'),
+    'publish_rate_hz': Number(100.0, 1.0, 10000.0, unit='Hz'),
+}
+GEOMETRY_SPEC = {
+    'length_m': Number(0.36, 0.0, 10.0, low_open=True, unit='m'),
+    'rest_minor_semi_axis_m': Number(None, 0.0, 5.0, low_open=True, unit='m'),
+    'initial_minor_semi_axis_m': Number(None, 0.0, 5.0, low_open=True, unit='m'),
+    'nozzle_radius_m': Number(0.022, 0.0, 1.0, low_open=True, unit='m'),
+    'nozzle_length_m': Number(0.036, 0.0, 1.0, low_open=True, unit='m'),
+    'nozzle_inlet_position': Number(0.82, -0.99, 0.99, unit='(x_e, fraction of a)'),
+    'solid_volume_m3': Number(0.0, 0.0, 1.0, unit='m^3'),
+}
+MATERIAL_SPEC = {
+    'stiffness_n_m': Number(None, 0.0, 1e9, low_open=True, unit='N/m'),
+    'shell_thickness_m': Number(None, 0.0, 1.0, low_open=True, unit='m'),
+    'density_kg_m3': Number(1100.0, 0.0, 1e5, low_open=True, unit='kg/m^3'),
+    'payload_mass_kg': Number(0.0, 0.0, 1e4, unit='kg'),
+}
+FLUID_SPEC = {
+    'density_kg_m3': Number(1000.0, 1.0, 2e4, unit='kg/m^3'),
+    'viscosity_pa_s': Number(1.0e-3, 0.0, 10.0, unit='Pa s'),
+    'drag_coefficient': Number(0.1, 0.0, 10.0, unit=''),
+    'inlet_loss_coefficient': Number(0.5, 0.0, 10.0, unit=''),
+}
+ACTUATOR_SPEC = {
+    'pump_time_constant_s': Number(0.05, 1e-4, 10.0, unit='s'),
+    'valve_stroke_time_s': Number(0.05, 1e-4, 10.0, unit='s'),
+    'initial_pump_flow_m3_s': Number(0.0, 0.0, Command.LIMITS['pump_flow_m3_s'][1], unit='m^3/s'),
+    'initial_valve_opening': Number(1.0, 0.0, 1.0, unit=''),
+}
+TERMS_SPEC = {name: Flag(True) for name in TERM_BITS}
+OPTIONS_SPEC = {
+    'energy_model': Choice('consistent', ('consistent', 'paper')),
+    'added_mass_form': Choice('exact', ('exact', 'simplified')),
+    'simplified_added_mass_coefficient': Number(0.45, 0.0, 10.0, unit=''),
+}
+SECTION_SPECS = {
+    'simulation': SIMULATION_SPEC,
+    'geometry': GEOMETRY_SPEC,
+    'material': MATERIAL_SPEC,
+    'fluid': FLUID_SPEC,
+    'actuator': ACTUATOR_SPEC,
+    'terms': TERMS_SPEC,
+    'options': OPTIONS_SPEC,
+}
+
+_BLOWUP_CAUSES = {
+    K.ERR_NONFINITE: 'a state value became non-finite',
+    K.ERR_B_LOW: 'the minor semi-axis collapsed below its bound',
+    K.ERR_B_HIGH: 'the minor semi-axis grew beyond the major semi-axis',
+    K.ERR_SPEED: 'the vehicle speed exceeded its bound',
+    K.ERR_SUBSTEPS: 'the step needs more sub-steps than allowed (stiffness out of range)',
+}
+
+
+def internal_added_mass_kg(rho: float, a: float, x_e: float) -> float:
+    """Paper's eq. 7: m_b = 4 pi/9 rho a^3 int_{-1}^{x_e} (1+x)^3 (2-x)^2 / (1-x) dx."""
+    value, _ = integrate.quad(lambda x: (1 + x) ** 3 * (2 - x) ** 2 / (1 - x), -1.0, x_e)
+    return 4.0 * math.pi / 9.0 * rho * a ** 3 * value
+
+
+def spheroid_area_m2(a: float, b: float) -> float:
+    """Surface of a prolate spheroid with semi-axes a >= b."""
+    e = math.sqrt(1.0 - (b / a) ** 2)
+    return 2.0 * math.pi * b * b * (1.0 + a / (b * e) * math.asin(e))
+
+
+def wall_inertia_kg(rho_s: float, thickness: float, a: float, b: float) -> float:
+    """Kinetic energy of the wall over b'^2/2 when every section radius R scales with b:
+    I_b = rho_s t int (R/b)^2 dS, taken at the rest shape (the wall is light next to m_b)."""
+    def integrand(x):
+        r = b * math.sqrt(max(1.0 - x * x / (a * a), 0.0))
+        drdx = -b * x / (a * a * math.sqrt(max(1.0 - x * x / (a * a), 1e-300)))
+        return (1.0 - x * x / (a * a)) * 2.0 * math.pi * r * math.sqrt(1.0 + drdx * drdx)
+    value, _ = integrate.quad(integrand, -a, a, limit=200)
+    return rho_s * thickness * value
+
+
+@dataclass(frozen=True)
+class LumpedModel:
+    """Immutable compiled lumped model; the mutable state lives in a numpy vector."""
+
+    params: np.ndarray
+    flags: int
+    dt_s: float
+    initial_b_m: float
+    initial_command: Command
+    terms: frozenset
+    options: Mapping[str, Any]
+    name: str = 'lumped'
+
+    @classmethod
+    def from_scene(cls, scene: Mapping[str, Any]) -> 'LumpedModel':
+        unknown = [k for k in scene if k != 'model' and k not in SECTION_SPECS]
+        if unknown:
+            raise ModelError(f'{unknown[0]}: unknown section for the lumped model; allowed: model, name, '
+                             f'description, routine, {", ".join(SECTION_SPECS)}')
+        sections = {name: check_section(name, scene.get(name), spec) for name, spec in SECTION_SPECS.items()}
+        g, m, f, act = sections['geometry'], sections['material'], sections['fluid'], sections['actuator']
+        terms, opts = sections['terms'], sections['options']
+        a = g['length_m'] / 2.0
+        b0, b_init = g['rest_minor_semi_axis_m'], g['initial_minor_semi_axis_m']
+        for key, value in (('rest_minor_semi_axis_m', b0), ('initial_minor_semi_axis_m', b_init)):
+            if value >= 0.95 * a:
+                raise ModelError(f'geometry.{key}: {value!r} m is not a prolate ellipsoid; allowed: '
+                                 f'below 0.95 x the major semi-axis ({0.95 * a:g} m)')
+        if not (terms['shell_inertia'] or terms['internal_added_mass'] or terms['nozzle_inertia']):
+            raise ModelError('terms: shell_inertia, internal_added_mass and nozzle_inertia are all false; '
+                             'allowed: at least one of them true (the shell needs inertia)')
+        rho = f['density_kg_m3']
+        r_n = g['nozzle_radius_m']
+        p = np.zeros(K.NP)
+        p[K.P_RHO] = rho
+        p[K.P_MU] = f['viscosity_pa_s']
+        p[K.P_A] = a
+        p[K.P_B0] = b0
+        p[K.P_K] = m['stiffness_n_m']
+        p[K.P_M_SOLID] = m['density_kg_m3'] * spheroid_area_m2(a, b0) * m['shell_thickness_m'] + m['payload_mass_kg']
+        p[K.P_I_B] = wall_inertia_kg(m['density_kg_m3'], m['shell_thickness_m'], a, b0)
+        p[K.P_M_B] = internal_added_mass_kg(rho, a, g['nozzle_inlet_position'])
+        p[K.P_L_N] = g['nozzle_length_m']
+        p[K.P_A_N] = math.pi * r_n * r_n
+        p[K.P_D_N] = 2.0 * r_n
+        p[K.P_K_INLET] = f['inlet_loss_coefficient']
+        p[K.P_CD] = f['drag_coefficient']
+        p[K.P_V_SOLID] = g['solid_volume_m3']
+        p[K.P_C1] = opts['simplified_added_mass_coefficient']
+        p[K.P_PUMP_TAU] = act['pump_time_constant_s']
+        p[K.P_VALVE_RATE] = 1.0 / act['valve_stroke_time_s']
+        p[K.P_B_MIN] = 0.02 * b0
+        p[K.P_B_MAX] = 0.999 * a
+        p[K.P_U_MAX] = 100.0
+        if g['solid_volume_m3'] >= 4.0 / 3.0 * math.pi * a * b0 * b0:
+            raise ModelError(f'geometry.solid_volume_m3: {g["solid_volume_m3"]!r} m^3 fills the rest cavity; '
+                             f'allowed: below {4.0 / 3.0 * math.pi * a * b0 * b0:.4g} m^3')
+        flags = 0
+        for name, bit in TERM_BITS.items():
+            if terms[name]:
+                flags |= bit
+        if opts['energy_model'] == 'consistent':
+            flags |= K.O_ENERGY_CONSISTENT
+        if opts['added_mass_form'] == 'simplified':
+            flags |= K.O_ADDED_MASS_SIMPLIFIED
+        p.setflags(write=False)
+        command = Command(act['initial_pump_flow_m3_s'], act['initial_valve_opening'], 0.0)
+        return cls(params=p, flags=flags, dt_s=sections['simulation']['dt_s'], initial_b_m=b_init,
+                   initial_command=command, terms=frozenset(n for n in TERM_BITS if terms[n]),
+                   options=dict(opts))
+
+    # ---- Model protocol ------------------------------------------------------------------------
+    def initial_state(self) -> np.ndarray:
+        y = np.zeros(K.NY)
+        y[K.Y_B] = self.initial_b_m
+        y[K.Y_QP] = self.initial_command.pump_flow_m3_s
+        y[K.Y_VALVE] = self.initial_command.valve_opening
+        if y[K.Y_VALVE] <= 0.0:
+            # a sealed cavity moves only with the pump
+            y[K.Y_W] = y[K.Y_QP] / (8.0 / 3.0 * math.pi * self.params[K.P_A] * self.initial_b_m)
+        return y
+
+    def advance(self, state: np.ndarray, time_s: float, n_steps: int, command: Command) -> int:
+        args = (state, self.params, float(command.pump_flow_m3_s), float(command.valve_opening),
+                int(n_steps), self.dt_s)
+        done, status = K.specialised(K.advance, self.flags, *args[:4], 0, self.dt_s)(self.flags, *args) \
+            if n_steps > 0 else (0, K.OK)
+        if status != K.OK:
+            t_fail = time_s + (done + 1) * self.dt_s
+            raise SimulationBlowUp(
+                f'lumped model stopped at t={t_fail:.6f} s: {_BLOWUP_CAUSES[status]} '
+                f'(b={state[K.Y_B]:.6g} m, db/dt={state[K.Y_W]:.6g} m/s, U={state[K.Y_U]:.6g} m/s); '
+                f'the state is kept at the last good step', time_s + done * self.dt_s)
+        return done
+
+    def diagnostics(self, state: np.ndarray, command: Command) -> np.ndarray:
+        diag = np.empty(K.ND)
+        K.specialised(K.evaluate, self.flags, state, self.params, 0.0, diag)(
+            self.flags, state, self.params, float(command.pump_flow_m3_s), diag)
+        return diag
+
+    def observe(self, state: np.ndarray, time_s: float, command: Command) -> Observation:
+        d = self.diagnostics(state, command)
+        p = self.params
+        b = state[K.Y_B]
+        volume = 4.0 / 3.0 * math.pi * p[K.P_A] * b * b - p[K.P_V_SOLID]
+        return Observation(
+            time_s=time_s, position_m=float(state[K.Y_X]), velocity_m_s=float(state[K.Y_U]),
+            acceleration_m_s2=float(d[K.D_ACCEL]), mantle_radius_m=float(b), volume_m3=float(volume),
+            fluid_mass_kg=float(p[K.P_RHO] * volume), thrust_n=float(d[K.D_THRUST]),
+            added_mass_force_n=float(d[K.D_AMV_FORCE]), drag_n=float(d[K.D_DRAG]),
+            jet_speed_m_s=float(d[K.D_Q_N] / p[K.P_A_N]) if state[K.Y_VALVE] > 0 else 0.0,
+            cavity_pressure_pa=float(d[K.D_P_CAV]), pump_flow_m3_s=float(state[K.Y_QP]),
+            valve_opening=float(state[K.Y_VALVE]))
+
+    def stored_energy(self, state: np.ndarray) -> tuple[float, float, float, float]:
+        diag = np.empty(K.ND)
+        return K.specialised(K.evaluate, self.flags, state, self.params, 0.0, diag)(
+            self.flags, state, self.params, 0.0, diag)
+
+    def energy_ledger(self, state: np.ndarray, initial_state: np.ndarray | None = None) -> dict[str, float]:
+        if initial_state is None:
+            initial_state = self.initial_state()
+        elastic, vehicle, outer, internal = self.stored_energy(state)
+        e0 = sum(self.stored_energy(initial_state))
+        out_other = state[K.Y_E_VALVE] + state[K.Y_E_MIX] + state[K.Y_E_KX]
+        ledger = {
+            'stored_elastic': elastic,
+            'stored_kinetic_vehicle': vehicle,
+            'stored_kinetic_outer_fluid': outer,
+            'stored_kinetic_internal': internal,
+            'in_initial': e0,
+            'in_pump_work': state[K.Y_W_PUMP],
+            'out_jet_kinetic': state[K.Y_E_JET],
+            'out_drag': state[K.Y_E_DRAG],
+            'out_viscous': state[K.Y_E_VISC],
+            'out_valve': state[K.Y_E_VALVE],
+            'out_inflow_mixing': state[K.Y_E_MIX],
+            'out_fluid_stiffness': state[K.Y_E_KX],
+            'out_other': out_other,
+        }
+        stored = elastic + vehicle + outer + internal
+        out = state[K.Y_E_JET] + state[K.Y_E_DRAG] + state[K.Y_E_VISC] + out_other
+        closure = stored - e0 - state[K.Y_W_PUMP] + out
+        ledger['closure_error'] = closure
+        ledger['closure_relative'] = closure / max(e0 + abs(state[K.Y_W_PUMP]), 1e-12)
+        return {k: float(v) for k, v in ledger.items()}
+
+    def profile(self, state: np.ndarray):
+        """Meridian of the ellipsoid (r, z), z from bow (+a) to stern (-a)."""
+        a = self.params[K.P_A]
+        z = np.linspace(a, -a, 41)
+        r = state[K.Y_B] * np.sqrt(np.clip(1.0 - (z / a) ** 2, 0.0, None))
+        return r, z
+
+    def stable_step_s(self, state: np.ndarray) -> float:
+        """Largest step RK4 keeps stable without sub-steps at this state."""
+        d = self.diagnostics(state, Command(float(state[K.Y_QP]), float(state[K.Y_VALVE]), 0.0))
+        rate = max(d[K.D_DAMPING_RATE], d[K.D_SPRING_RATE], 1e-12)
+        return K.RK4_STABLE_REAL / rate
+
+    # ---- figures the paper reports -------------------------------------------------------------
+    def fluid_stiffness_ratio(self, state: np.ndarray) -> float:
+        """k_x / k at this state (paper's Fig. 6)."""
+        _, k_x = K.fluid_stiffness_force(state[K.Y_B], state[K.Y_U], self.params)
+        return float(k_x / self.params[K.P_K])

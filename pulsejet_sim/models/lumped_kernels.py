@@ -1,0 +1,447 @@
+"""numba kernels of the lumped pulsed-jet model (paper 001, section 3): vehicle axial motion and the
+minor semi-axis ``b`` of an ellipsoidal shell, with the pump and the stern valve as inputs.
+
+Equations (see ``docs/PHYSICS_LUMPED.md`` for the derivation and the energy ledger)::
+
+    vehicle:  (M + m_f + m_x) U' = T - D - m_x' U - rho Q_in U
+    shell:    (I_b + m_b + m_l) b'' = -k (b - b0) - F_kx + R_x + V_b dp_n + Lambda V_b (Q_p' - c_a b'^2)
+
+with ``V_b = dV/db = 8/3 pi a b``, the nozzle flow ``Q_n = Q_p - V_b b'`` (continuity, positive out),
+the nozzle inertance ``Lambda = rho L_n / A_n`` (so ``m_l = Lambda V_b^2``, the paper's eq. 8) and the
+pressure drop across the nozzle ``dp_n`` (laminar friction, inlet loss, valve loss and, in the
+energy-consistent model, the Bernoulli pressure that accelerates the jet).
+
+Physical terms are bits of an integer ``flags`` that reaches the step loop through
+``numba.literally``: numba compiles (and caches) one specialisation per term set and LLVM removes
+the branches of the terms that are off, so a term that is off costs nothing.
+
+State vector ``y`` (float64): see the ``Y_*`` indices. The energy ledger integrals are state
+components, integrated by the same Runge-Kutta scheme as the motion, so the closure error of the
+ledger measures the integration error alone.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import literally, njit
+
+# ---- term bits --------------------------------------------------------------------------------
+T_SHELL_INERTIA = 1 << 0
+T_INTERNAL_ADDED_MASS = 1 << 1
+T_NOZZLE_INERTIA = 1 << 2
+T_VISCOUS_LOSS = 1 << 3
+T_FLUID_STIFFNESS = 1 << 4
+T_ADDED_MASS = 1 << 5
+T_ADDED_MASS_VARIATION = 1 << 6
+T_FLUID_MASS = 1 << 7
+T_DRAG = 1 << 8
+T_JET_THRUST = 1 << 9
+# model options (also bits, so they are compiled in the same way)
+O_ENERGY_CONSISTENT = 1 << 16     # the shell pays for the jet: Bernoulli back pressure etc.
+O_ADDED_MASS_SIMPLIFIED = 1 << 17  # m_x = C_1 rho 4/3 pi b^3 instead of Lamb's exact spheroid
+
+# ---- state indices ----------------------------------------------------------------------------
+Y_X = 0            # vehicle position, m
+Y_U = 1            # vehicle velocity, m/s
+Y_B = 2            # minor semi-axis, m
+Y_W = 3            # db/dt, m/s
+Y_QP = 4           # actual pump flow, m^3/s (first-order lag behind the command)
+Y_W_PUMP = 5       # ledger integrals, J
+Y_E_JET = 6
+Y_E_DRAG = 7
+Y_E_VISC = 8
+Y_E_VALVE = 9      # valve throttling loss plus the loss when the valve seals a moving flow
+Y_E_MIX = 10       # kinetic energy given to water drawn in (pump and nozzle inflow), then mixed
+Y_E_KX = 11        # work of the shell against the fluid-stiffness pressure
+Y_VALVE = 12       # actual valve opening 0..1 (rate limited, piecewise constant over a step)
+NY = 13
+N_INTEGRATED = 12  # components 0..11 go through Runge-Kutta
+
+# ---- parameter indices ------------------------------------------------------------------------
+P_RHO = 0          # water density, kg/m^3
+P_MU = 1           # water dynamic viscosity, Pa s
+P_A = 2            # major semi-axis a, m
+P_B0 = 3           # rest minor semi-axis b0, m
+P_K = 4            # lumped shell stiffness, N/m
+P_M_SOLID = 5      # shell + payload mass, kg
+P_I_B = 6          # shell wall inertia of the b mode, kg
+P_M_B = 7          # internal added mass of the b mode, kg
+P_L_N = 8          # nozzle length, m
+P_A_N = 9          # nozzle section, m^2
+P_D_N = 10         # nozzle diameter, m
+P_K_INLET = 11     # square-edged inlet loss coefficient
+P_CD = 12          # drag coefficient
+P_V_SOLID = 13     # volume inside the shell not filled by water, m^3
+P_C1 = 14          # coefficient of the simplified added mass
+P_PUMP_TAU = 15    # pump spin-up time constant, s
+P_VALVE_RATE = 16  # valve stroke rate, 1/s
+P_B_MIN = 17       # bounds of b that the model accepts, m
+P_B_MAX = 18
+P_U_MAX = 19       # bound of |U|, m/s
+NP = 20
+
+# ---- diagnostic outputs of the right-hand side --------------------------------------------------
+D_THRUST = 0
+D_AMV_FORCE = 1
+D_DRAG = 2
+D_Q_N = 3
+D_P_CAV = 4
+D_ACCEL = 5
+D_M_X = 6
+D_K_X = 7
+D_M_L = 8
+D_VEHICLE_MASS = 9
+D_B_MASS = 10
+D_DAMPING_RATE = 11  # estimate of the fastest decay rate, 1/s (sets the sub-steps)
+D_SPRING_RATE = 12   # shell angular frequency sqrt(k_eff/m), rad/s
+ND = 13
+
+# status codes of advance()
+OK = 0
+ERR_NONFINITE = 1
+ERR_B_LOW = 2
+ERR_B_HIGH = 3
+ERR_SPEED = 4
+ERR_SUBSTEPS = 5
+
+RK4_STABLE_REAL = 2.785   # RK4 stability limit on the negative real axis
+MAX_SUBSTEPS = 4096
+
+
+@njit(cache=True, inline='always')
+def added_mass(flags, b, p):
+    """Axial added mass m_x(b) and dm_x/db of the prolate spheroid (kg, kg/m)."""
+    rho = p[P_RHO]
+    a = p[P_A]
+    if flags & O_ADDED_MASS_SIMPLIFIED:
+        c = p[P_C1] * rho * 4.0 / 3.0 * math.pi
+        return c * b ** 3, 3.0 * c * b ** 2
+    # Lamb's exact potential-flow coefficient k1 = alpha0 / (2 - alpha0)
+    ratio = b / a
+    e2 = 1.0 - ratio * ratio
+    e = math.sqrt(e2)
+    g = math.atanh(e) - e
+    alpha0 = 2.0 * (1.0 - e2) / (e2 * e) * g
+    dalpha_de = 2.0 * g * (-2.0 / e2 - 3.0 * (1.0 - e2) / (e2 * e2)) + 2.0 / e
+    de_db = -b / (a * a * e)
+    k1 = alpha0 / (2.0 - alpha0)
+    dk1_db = 2.0 / (2.0 - alpha0) ** 2 * dalpha_de * de_db
+    vol_coef = rho * 4.0 / 3.0 * math.pi * a
+    return k1 * vol_coef * b * b, vol_coef * (dk1_db * b * b + 2.0 * k1 * b)
+
+
+@njit(cache=True, inline='always')
+def fluid_stiffness_force(b, u, p):
+    """Paper's external-flow pressure on the shell: F = q 2 pi a b dCp, dCp = -2 Cp,
+    Cp = 1 - (1 + b/2a)^2, q = rho U^2 / 2. Returns (F in N, k_x = dF/db in N/m)."""
+    a = p[P_A]
+    q = 0.5 * p[P_RHO] * u * u
+    s = 1.0 + b / (2.0 * a)
+    dcp = 2.0 * (s * s - 1.0)
+    ddcp_db = 2.0 * s / a
+    force = q * 2.0 * math.pi * a * b * dcp
+    k_x = q * 2.0 * math.pi * a * (dcp + b * ddcp_db)
+    return force, k_x
+
+
+@njit(cache=True)
+def rhs(flags, y, valve, q_cmd, p, dy, diag):
+    """Time derivatives of y at fixed valve opening and pump command; fills diag."""
+    rho = p[P_RHO]
+    a = p[P_A]
+    u = y[Y_U]
+    b = y[Y_B]
+    w = y[Y_W]
+    q_p = y[Y_QP]
+    dq_p = (q_cmd - q_p) / p[P_PUMP_TAU]
+    c_a = 8.0 / 3.0 * math.pi * a
+    v_b = c_a * b                     # dV/db, m^2
+    volume = c_a * b * b / 2.0        # 4/3 pi a b^2
+    a_n = p[P_A_N]
+
+    # shell inertia of the b mode (the nozzle part depends on the flow and is added below)
+    m_shell = 0.0
+    if flags & T_SHELL_INERTIA:
+        m_shell += p[P_I_B]
+    if flags & T_INTERNAL_ADDED_MASS:
+        m_shell += p[P_M_B]
+    inertance = 0.0
+    if flags & T_NOZZLE_INERTIA:
+        inertance = rho * p[P_L_N] / a_n
+    m_l = inertance * v_b * v_b
+
+    # outer flow
+    m_x = 0.0
+    dmx_db = 0.0
+    if flags & (T_ADDED_MASS | T_ADDED_MASS_VARIATION):
+        m_x, dmx_db = added_mass(flags, b, p)
+    f_kx = 0.0
+    k_x = 0.0
+    if flags & T_FLUID_STIFFNESS:
+        f_kx, k_x = fluid_stiffness_force(b, u, p)
+    reaction = 0.0
+    if flags & T_ADDED_MASS_VARIATION:
+        if flags & O_ENERGY_CONSISTENT:
+            # the outer flow's pull on the shell that pays for d(1/2 m_x U^2)/dt
+            reaction = 0.5 * dmx_db * u * u
+
+    sealed = valve <= 0.0
+    damping_rate = 0.0
+    if sealed:
+        # valve shut: incompressible water, the pump alone sets the volume rate
+        q_n = 0.0
+        dw = (dq_p - c_a * w * w) / v_b
+        spring = p[P_K] + k_x
+        p_cav = (m_shell * dw + p[P_K] * (b - p[P_B0]) + f_kx - reaction) / v_b
+        dp_visc = 0.0
+        dp_valve = 0.0
+        dp_jet = 0.0
+        m_b_total = m_shell
+    else:
+        q_n = q_p - v_b * w
+        u_n = q_n / a_n
+        sgn = 1.0 if u_n >= 0.0 else -1.0
+        dp_visc = 0.0
+        dpdq = 0.0
+        if flags & T_VISCOUS_LOSS:
+            d_n = p[P_D_N]
+            lam = 32.0 * p[P_MU] * p[P_L_N] / (d_n * d_n)
+            dp_visc = lam * u_n + sgn * 0.5 * rho * p[P_K_INLET] * u_n * u_n
+            dpdq += (lam + rho * p[P_K_INLET] * abs(u_n)) / a_n
+        # valve as an orifice at the nozzle inlet: Borda-Carnot loss of the contraction to valve*A_n
+        contraction = 1.0 / valve - 1.0
+        dp_valve = sgn * 0.5 * rho * contraction * contraction * u_n * u_n
+        dpdq += rho * contraction * contraction * abs(u_n) / a_n
+        dp_jet = 0.0
+        convective = 0.0
+        if flags & O_ENERGY_CONSISTENT:
+            dp_jet = sgn * 0.5 * rho * u_n * u_n
+            dpdq += rho * abs(u_n) / a_n
+            convective = c_a * w * w
+        dp_n = dp_visc + dp_valve + dp_jet
+        m_b_total = m_shell + m_l
+        force = (-p[P_K] * (b - p[P_B0]) - f_kx + reaction + v_b * dp_n
+                 + inertance * v_b * (dq_p - convective))
+        dw = force / m_b_total
+        # cavity pressure at the nozzle inlet: what the nozzle flow needs (drop + acceleration)
+        dq_n = dq_p - c_a * w * w - v_b * dw
+        p_cav = dp_n + inertance * dq_n
+        spring = p[P_K] + k_x
+        damping_rate = v_b * v_b * dpdq / m_b_total
+
+    # vehicle
+    m_vehicle = p[P_M_SOLID]
+    if flags & T_FLUID_MASS:
+        m_vehicle += rho * (volume - p[P_V_SOLID])
+    if flags & T_ADDED_MASS:
+        m_vehicle += m_x
+    thrust = 0.0
+    if flags & T_JET_THRUST:
+        if q_n > 0.0:
+            thrust = rho * q_n * q_n / a_n
+    drag = 0.0
+    if flags & T_DRAG:
+        drag = 0.5 * rho * p[P_CD] * math.pi * b * b * u * abs(u)
+    amv_force = 0.0
+    if flags & T_ADDED_MASS_VARIATION:
+        amv_force = -dmx_db * w * u
+    q_in = q_p
+    if q_n < 0.0:
+        q_in -= q_n
+    ram = 0.0
+    if flags & T_FLUID_MASS:
+        # water drawn in at rest must be brought to the vehicle's speed
+        ram = rho * q_in * u
+    du = (thrust - drag + amv_force - ram) / m_vehicle
+
+    dy[Y_X] = u
+    dy[Y_U] = du
+    dy[Y_B] = w
+    dy[Y_W] = dw
+    dy[Y_QP] = dq_p
+    # ledger rates, W
+    dy[Y_W_PUMP] = p_cav * q_p
+    if q_n > 0.0:
+        u_j = q_n / a_n
+        dy[Y_E_JET] = 0.5 * rho * q_n * (u_j - u) ** 2       # earth frame
+        dy[Y_E_MIX] = 0.5 * rho * q_in * u * u
+    else:
+        # inflow through the nozzle: its jet into the cavity and its speed-up to U are mixed away
+        dy[Y_E_JET] = 0.0
+        dy[Y_E_MIX] = 0.5 * rho * q_in * u * u + q_n * dp_jet
+    dy[Y_E_DRAG] = drag * u
+    dy[Y_E_VISC] = q_n * dp_visc
+    dy[Y_E_VALVE] = q_n * dp_valve
+    dy[Y_E_KX] = f_kx * w
+
+    diag[D_THRUST] = thrust
+    diag[D_AMV_FORCE] = amv_force
+    diag[D_DRAG] = -drag
+    diag[D_Q_N] = q_n
+    diag[D_P_CAV] = p_cav
+    diag[D_ACCEL] = du
+    diag[D_M_X] = m_x
+    diag[D_K_X] = k_x
+    diag[D_M_L] = m_l
+    diag[D_VEHICLE_MASS] = m_vehicle
+    diag[D_B_MASS] = m_b_total
+    diag[D_DAMPING_RATE] = damping_rate
+    diag[D_SPRING_RATE] = math.sqrt(abs(spring) / m_b_total) if m_b_total > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag):
+    n = N_INTEGRATED
+    rhs(flags, y, valve, q_cmd, p, k1, diag)
+    for i in range(n):
+        tmp[i] = y[i] + 0.5 * h * k1[i]
+    tmp[Y_VALVE] = valve
+    rhs(flags, tmp, valve, q_cmd, p, k2, diag)
+    for i in range(n):
+        tmp[i] = y[i] + 0.5 * h * k2[i]
+    rhs(flags, tmp, valve, q_cmd, p, k3, diag)
+    for i in range(n):
+        tmp[i] = y[i] + h * k3[i]
+    rhs(flags, tmp, valve, q_cmd, p, k4, diag)
+    for i in range(n):
+        y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+
+
+@njit(cache=True)
+def _check(y, p):
+    for i in range(NY):
+        if not math.isfinite(y[i]):
+            return ERR_NONFINITE
+    if y[Y_B] <= p[P_B_MIN]:
+        return ERR_B_LOW
+    if y[Y_B] >= p[P_B_MAX]:
+        return ERR_B_HIGH
+    if abs(y[Y_U]) > p[P_U_MAX]:
+        return ERR_SPEED
+    return OK
+
+
+@njit(cache=True)
+def stored_energy(flags, y, p):
+    """Mechanical energy held by the system, J: (elastic, vehicle, outer fluid, internal)."""
+    rho = p[P_RHO]
+    b = y[Y_B]
+    w = y[Y_W]
+    u = y[Y_U]
+    elastic = 0.5 * p[P_K] * (b - p[P_B0]) ** 2
+    m_vehicle = p[P_M_SOLID]
+    if flags & T_FLUID_MASS:
+        m_vehicle += rho * (4.0 / 3.0 * math.pi * p[P_A] * b * b - p[P_V_SOLID])
+    m_x = 0.0
+    if flags & T_ADDED_MASS:
+        m_x, _ = added_mass(flags, b, p)
+    m_shell = 0.0
+    if flags & T_SHELL_INERTIA:
+        m_shell += p[P_I_B]
+    if flags & T_INTERNAL_ADDED_MASS:
+        m_shell += p[P_M_B]
+    internal = 0.5 * m_shell * w * w
+    if flags & T_NOZZLE_INERTIA:
+        if y[Y_VALVE] > 0.0:
+            q_n = y[Y_QP] - 8.0 / 3.0 * math.pi * p[P_A] * b * w
+            internal += 0.5 * rho * p[P_L_N] / p[P_A_N] * q_n * q_n
+    return elastic, 0.5 * m_vehicle * u * u, 0.5 * m_x * u * u, internal
+
+
+@njit(cache=True)
+def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
+    """Advance y by n_steps fixed steps of dt. Returns (steps done, status); on a bad state y is
+    restored to the last good step."""
+    k1 = np.empty(NY)
+    k2 = np.empty(NY)
+    k3 = np.empty(NY)
+    k4 = np.empty(NY)
+    tmp = np.empty(NY)
+    diag = np.empty(ND)
+    last = y.copy()
+    for step in range(n_steps):
+        for i in range(NY):
+            last[i] = y[i]
+        valve = y[Y_VALVE]
+        tmp[:] = y
+        rhs(flags, y, valve, q_cmd, p, k1, diag)
+        # Sub-steps keep RK4 inside its stability region when the valve throttles a fast flow
+        # (the loss rate grows like 1/opening^2) or a light shell meets a stiff spring.
+        rate = max(diag[D_DAMPING_RATE], diag[D_SPRING_RATE])
+        n_sub = 1
+        if rate * dt > 1.5:
+            n_sub = int(math.ceil(rate * dt / 1.5))
+            if n_sub > MAX_SUBSTEPS:
+                return step, ERR_SUBSTEPS
+        h = dt / n_sub
+        for _ in range(n_sub):
+            _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag)
+        # the valve moves at its stroke rate between steps
+        if valve_cmd != valve:
+            stroke = p[P_VALVE_RATE] * dt
+            new_valve = valve_cmd
+            if valve_cmd > valve + stroke:
+                new_valve = valve + stroke
+            elif valve_cmd < valve - stroke:
+                new_valve = valve - stroke
+            if new_valve <= 0.0 < valve:
+                # sealing a moving flow: the water in the nozzle stops and the shell follows the
+                # pump; the kinetic energy this removes is lost in the valve
+                e_before = stored_energy(flags, y, p)
+                y[Y_VALVE] = 0.0
+                y[Y_W] = y[Y_QP] / (8.0 / 3.0 * math.pi * p[P_A] * y[Y_B])
+                e_after = stored_energy(flags, y, p)
+                y[Y_E_VALVE] += (e_before[3] - e_after[3])
+            else:
+                y[Y_VALVE] = new_valve
+        status = _check(y, p)
+        if status != OK:
+            for i in range(NY):
+                y[i] = last[i]
+            return step, status
+    return n_steps, OK
+
+
+@njit(cache=True)
+def advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
+    """Entry point: specialise on the term set (see module docstring)."""
+    return _advance(literally(flags), y, p, q_cmd, valve_cmd, n_steps, dt)
+
+
+@njit(cache=True)
+def _evaluate(flags, y, p, q_cmd, diag):
+    dy = np.empty(NY)
+    rhs(flags, y, y[Y_VALVE], q_cmd, p, dy, diag)
+    e = stored_energy(flags, y, p)
+    return e[0], e[1], e[2], e[3]
+
+
+@njit(cache=True)
+def evaluate(flags, y, p, q_cmd, diag):
+    """Fill diag at the state y and return the stored energies (see stored_energy)."""
+    return _evaluate(literally(flags), y, p, q_cmd, diag)
+
+
+_SPECIALISED: dict = {}
+
+
+def specialised(dispatcher, flags: int, *args):
+    """The compiled entry point of `dispatcher` for this literal flag value.
+
+    ``numba.literally`` re-dispatches through Python on every call (milliseconds); the entry point
+    of the specialisation skips that, so a batch of a few physics steps stays cheap. The first call
+    compiles (or loads from the on-disk cache) the specialisation.
+    """
+    key = (dispatcher, flags)
+    fn = _SPECIALISED.get(key)
+    if fn is None:
+        dispatcher(flags, *args)
+        for sig, cres in dispatcher.overloads.items():
+            if getattr(sig[0], 'literal_value', None) == flags:
+                fn = cres.entry_point
+                break
+        else:   # pragma: no cover - numba changed how it stores literal specialisations
+            fn = dispatcher
+        _SPECIALISED[key] = fn
+    return fn

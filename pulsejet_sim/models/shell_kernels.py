@@ -1,0 +1,744 @@
+"""Numba kernels of the axisymmetric Reissner shell mantle (paper 000).  No ROS, no Python objects.
+
+Discretisation (see shell.py for the full model description)
+-------------------------------------------------------------
+Nodes i = 0..N carry ``(r_i, z_i, theta_i)``; dof index ``3 i + k`` (k = 0 r, 1 z, 2 theta).
+Element e joins nodes e, e+1 and is evaluated at its midpoint (one-point, reduced integration:
+no shear locking, and the hoop terms only ever see ``r0`` at element midpoints, which is > 0
+even next to the pole -> no polar singularity)::
+
+    r_X = (r_{e+1} - r_e)/ds,  z_X = (z_{e+1} - z_e)/ds,  theta_m = (theta_e + theta_{e+1})/2
+    lambda = r_X cos th + z_X sin th,  eta = -r_X sin th + z_X cos th,  mu = (theta_{e+1}-theta_e)/ds
+    tau = r_m / r0_m,  varsigma = sin th / r0_m
+    e11 = (lambda^2 + eta^2 - 1)/2        e22 = (tau^2 - tau_d^2)/2      gamma = eta - eta0
+    d11 = mu0 lambda0 - mu lambda         d22 = varsigma0 - tau varsigma
+
+``ds`` is the reference chord, ``eta0, lambda0, mu0, varsigma0`` are the *discrete* reference
+values, so the sampled reference shape is exactly stress free.  ``tau_d`` is the muscle's
+desired hoop stretch (1 when passive).
+
+Stored energy (Kelvin-Voigt elastic part, h the half-thickness, A_e = 2 pi r0_m ds)::
+
+    W_e = A_e [ Psi/2 (e11^2 + 2 nu e11 e22 + e22^2) + Js Psi/2 (d11^2 + 2 nu d11 d22 + d22^2)
+                + G_s/2 gamma^2 ]
+    Psi = 2 E h/(1-nu^2),  Js = h^2/3,  G_s = 2 h G,  G = E/(2(1+nu))
+
+Internal forces are exactly ``-dW/dq = -B^T sigma`` (B = d strain / dq), so without viscosity
+and fluid loads the semi-discrete system is Hamiltonian.  The Kelvin-Voigt viscous forces come
+from the dissipation function ``D = A_e [Psi2/2 (.. rates ..) + Js Psi2/2 (..) + G_v/2 gamma_dot^2]``
+(``Psi2 = 6 eta_v h/(1-nu^2)``, ``G_v = 2 h eta_v``): ``f_v = -B^T D_v B q_dot``, power ``2D >= 0``.
+
+Velocities: radial and angular velocities are relative to the body (= absolute for r), the axial
+velocity of each node is stored **absolute** (``w = z_dot + U``, U the vehicle speed), which
+makes the mass matrix block diagonal: shell nodes and vehicle only interact through the forces
+at the clamped ring, the cavity pressure and the jet.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import literally, njit
+
+# ---- flags (bitmask, compiled out via numba.literally) -------------------------------------
+F_VISC = 1
+F_DRAG = 2
+F_JET = 4
+F_BODY = 8
+F_CABLE = 16
+F_MUSCLE = 32
+F_ROUTINE = 64
+
+# ---- parameter vector P ---------------------------------------------------------------------
+P_PSI, P_PSI2, P_JS, P_GS, P_GV, P_NU = 0, 1, 2, 3, 4, 5
+P_RHO, P_AOUT, P_AIN, P_CF, P_CT, P_CD = 6, 7, 8, 9, 10, 11
+P_MBODY, P_AMP, P_FREQ, P_TC, P_TR = 12, 13, 14, 15, 16
+P_DT, P_ALPHA, P_TOL, P_RLIM, P_QLIM, P_MAXIT, P_DELAY, P_V0, P_VLIM = 17, 18, 19, 20, 21, 22, 23, 24, 25
+N_PARAMS = 26
+
+# ---- element table E[e, :] -------------------------------------------------------------------
+E_DS, E_R0M, E_LAM0, E_ETA0, E_K0, E_VS0, E_SMUS, E_AREA = 0, 1, 2, 3, 4, 5, 6, 7
+N_ECOLS = 8
+
+# ---- node table Nd[i, :] --------------------------------------------------------------------
+N_MRR, N_MRZ, N_MZZ, N_MTT, N_FIXR, N_FIXZ, N_FIXT, N_WC, N_DAREA = 0, 1, 2, 3, 4, 5, 6, 7, 8
+N_NCOLS = 9
+
+# ---- state tail (after q[3 n1] and v[3 n1]) ------------------------------------------------
+S_X, S_U, S_A, S_IN, S_JET, S_DRAG, S_VISC, S_OTHER = 0, 1, 2, 3, 4, 5, 6, 7
+S_THR, S_BDRAG, S_UJ, S_P, S_VOL, S_VDOT, S_TIME = 8, 9, 10, 11, 12, 13, 14
+N_TAIL = 15
+
+# ---- stats returned by the force evaluation -------------------------------------------------
+T_EEL, T_PVISC, T_PDRAG, T_VOL, T_VDOT, T_P, T_PACT, T_FRING, T_RMAX = 0, 1, 2, 3, 4, 5, 6, 7, 8
+N_STATS = 9
+
+# blow-up codes
+OK, ERR_NONFINITE, ERR_AXIS, ERR_BOUNDS, ERR_NEWTON = 0, 1, 2, 3, 4
+BW = 5  # half bandwidth of the dof ordering
+
+
+@njit(cache=True)
+def routine(t, P):
+    """Activation a(t) in [0, 1] and da/dt of the periodic routine: half-cosine rise over the
+    contraction time, half-cosine fall over the release time, rest for the remaining period."""
+    t = t - P[P_DELAY]
+    if t < 0.0:
+        return 0.0, 0.0
+    per = 1.0 / P[P_FREQ]
+    ph = t - per * math.floor(t / per)
+    tc = P[P_TC]
+    tr = P[P_TR]
+    if ph < tc:
+        x = math.pi * ph / tc
+        return 0.5 * (1.0 - math.cos(x)), 0.5 * math.pi / tc * math.sin(x)
+    if ph < tc + tr:
+        x = math.pi * (ph - tc) / tr
+        return 0.5 * (1.0 + math.cos(x)), -0.5 * math.pi / tr * math.sin(x)
+    return 0.0, 0.0
+
+
+@njit(cache=True)
+def element_strain(q6, ds, r0m, lam0, eta0, k0, vs0, taud, B):
+    """Strains (e11, e22, gamma, d11, d22) of one element and their gradient B (5 x 6)."""
+    r1, z1, t1, r2, z2, t2 = q6[0], q6[1], q6[2], q6[3], q6[4], q6[5]
+    rX = (r2 - r1) / ds
+    zX = (z2 - z1) / ds
+    th = 0.5 * (t1 + t2)
+    c = math.cos(th)
+    s = math.sin(th)
+    lam = rX * c + zX * s
+    eta = -rX * s + zX * c
+    mu = (t2 - t1) / ds
+    tau = 0.5 * (r1 + r2) / r0m
+    vs = s / r0m
+    e11 = 0.5 * (rX * rX + zX * zX - 1.0)
+    e22 = 0.5 * (tau * tau - taud * taud)
+    gam = eta - eta0
+    d11 = k0 - mu * lam
+    d22 = vs0 - tau * vs
+    ids = 1.0 / ds
+    # e11
+    B[0, 0] = -rX * ids; B[0, 1] = -zX * ids; B[0, 2] = 0.0
+    B[0, 3] = rX * ids;  B[0, 4] = zX * ids;  B[0, 5] = 0.0
+    # e22
+    g = 0.5 * tau / r0m
+    B[1, 0] = g; B[1, 1] = 0.0; B[1, 2] = 0.0; B[1, 3] = g; B[1, 4] = 0.0; B[1, 5] = 0.0
+    # gamma = eta - eta0
+    B[2, 0] = s * ids; B[2, 1] = -c * ids; B[2, 2] = -0.5 * lam
+    B[2, 3] = -s * ids; B[2, 4] = c * ids; B[2, 5] = -0.5 * lam
+    # d11 = k0 - mu lam ; dlam = (-c/ds, -s/ds, eta/2, c/ds, s/ds, eta/2) ; dmu = (0,0,-1/ds,0,0,1/ds)
+    B[3, 0] = mu * c * ids; B[3, 1] = mu * s * ids; B[3, 2] = lam * ids - 0.5 * mu * eta
+    B[3, 3] = -mu * c * ids; B[3, 4] = -mu * s * ids; B[3, 5] = -lam * ids - 0.5 * mu * eta
+    # d22 = vs0 - tau vs
+    g2 = -0.5 * vs / r0m
+    g3 = -0.5 * tau * c / r0m
+    B[4, 0] = g2; B[4, 1] = 0.0; B[4, 2] = g3; B[4, 3] = g2; B[4, 4] = 0.0; B[4, 5] = g3
+    return e11, e22, gam, d11, d22
+
+
+@njit(cache=True)
+def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
+    """Elastic + viscous generalised force on the 6 element dofs (into f6, overwritten).
+
+    out[0] = elastic energy, out[1] = viscous power (>= 0), out[2] = sigma_22 (membrane hoop
+    resultant times area, for the muscle power)."""
+    ds = Erow[E_DS]
+    A = Erow[E_AREA]
+    e11, e22, gam, d11, d22 = element_strain(q6, ds, Erow[E_R0M], Erow[E_LAM0], Erow[E_ETA0], Erow[E_K0],
+                                             Erow[E_VS0], taud, B)
+    psi = P[P_PSI]
+    nu = P[P_NU]
+    pj = psi * P[P_JS]
+    s0 = A * psi * (e11 + nu * e22)
+    s1 = A * psi * (e22 + nu * e11)
+    s2 = A * P[P_GS] * gam
+    s3 = A * pj * (d11 + nu * d22)
+    s4 = A * pj * (d22 + nu * d11)
+    energy = 0.5 * A * (psi * (e11 * e11 + 2 * nu * e11 * e22 + e22 * e22)
+                        + pj * (d11 * d11 + 2 * nu * d11 * d22 + d22 * d22) + P[P_GS] * gam * gam)
+    pvisc = 0.0
+    if flags & F_VISC:
+        r0 = 0.0; r1 = 0.0; r2 = 0.0; r3 = 0.0; r4 = 0.0
+        for j in range(6):
+            vj = v6[j]
+            r0 += B[0, j] * vj; r1 += B[1, j] * vj; r2 += B[2, j] * vj; r3 += B[3, j] * vj; r4 += B[4, j] * vj
+        psi2 = P[P_PSI2]
+        pj2 = psi2 * P[P_JS]
+        v0 = A * psi2 * (r0 + nu * r1)
+        v1 = A * psi2 * (r1 + nu * r0)
+        v2 = A * P[P_GV] * r2
+        v3 = A * pj2 * (r3 + nu * r4)
+        v4 = A * pj2 * (r4 + nu * r3)
+        pvisc = v0 * r0 + v1 * r1 + v2 * r2 + v3 * r3 + v4 * r4
+        s0 += v0; s1v = s1 + v1; s2 += v2; s3 += v3; s4 += v4
+    else:
+        s1v = s1
+    for j in range(6):
+        f6[j] = -(B[0, j] * s0 + B[1, j] * s1v + B[2, j] * s2 + B[3, j] * s3 + B[4, j] * s4)
+    out[0] = energy
+    out[1] = pvisc
+    out[2] = s1
+    return energy
+
+
+@njit(cache=True)
+def volume_grad(q, n1, g):
+    """Cavity volume between the shell and the ring plane, V = sum of frusta
+    pi/3 (r_i^2 + r_i r_j + r_j^2)(z_i - z_j), and its gradient g (dofs 3i, 3i+1)."""
+    for k in range(3 * n1):
+        g[k] = 0.0
+    V = 0.0
+    for e in range(n1 - 1):
+        ra = q[3 * e]; za = q[3 * e + 1]
+        rb = q[3 * e + 3]; zb = q[3 * e + 4]
+        S = ra * ra + ra * rb + rb * rb
+        dz = za - zb
+        V += math.pi / 3.0 * S * dz
+        g[3 * e] += math.pi / 3.0 * (2 * ra + rb) * dz
+        g[3 * e + 3] += math.pi / 3.0 * (ra + 2 * rb) * dz
+        g[3 * e + 1] += math.pi / 3.0 * S
+        g[3 * e + 4] -= math.pi / 3.0 * S
+    return V
+
+
+@njit(cache=True)
+def jet_terms(Vdot, U, P):
+    """Jet model: returns (p, u_j, thrust, ram, P_jet_out, P_other).
+
+    Outflow (V' < 0): u_j = -V'/A_out, p = rho u_j^2 / 2 on the inner surface (the shell pays the
+    jet's kinetic energy flux), thrust C_f rho A_out u_j^2; earth-frame jet energy flux
+    rho A u_j (u_j - U)^2 / 2; a C_f != 1 mismatch (1 - C_f) rho A u_j^2 U is booked as 'other'.
+    Inflow (V' > 0) through A_in: suction p = -rho u_in^2 / 2, the inflow kinetic energy and the
+    ram loss of bringing the ingested water to the vehicle speed (ram force rho V' U) mix away."""
+    rho = P[P_RHO]
+    if Vdot < 0.0:
+        A = P[P_AOUT]
+        u = -Vdot / A
+        p = 0.5 * rho * u * u
+        thr = P[P_CF] * rho * A * u * u
+        du = u - U
+        return p, u, thr, 0.0, 0.5 * rho * A * u * du * du, (1.0 - P[P_CF]) * rho * A * u * u * U
+    A = P[P_AIN]
+    u = Vdot / A
+    p = -0.5 * rho * u * u
+    ram = rho * Vdot * U
+    return p, -u, 0.0, ram, 0.0, 0.5 * rho * A * u * u * u + 0.5 * rho * Vdot * U * U
+
+
+@njit(cache=True)
+def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
+    """All generalised forces on the shell dofs at (q, v, U, t), into F (including the reactions
+    on constrained dofs). Fills st (stats), gV (volume gradient), vrel (velocities rel. body)."""
+    n1 = Nd.shape[0]
+    n = 3 * n1
+    ne = n1 - 1
+    for k in range(n):
+        F[k] = 0.0
+    for i in range(n1):
+        vrel[3 * i] = v[3 * i] * (1.0 - Nd[i, N_FIXR])
+        vrel[3 * i + 1] = (v[3 * i + 1] - U) * (1.0 - Nd[i, N_FIXZ])
+        vrel[3 * i + 2] = v[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
+    # activation
+    a = 1.0
+    adot = 0.0
+    if flags & F_ROUTINE:
+        a, adot = routine(t, P)
+    B = np.empty((5, 6))
+    f6 = np.empty(6)
+    q6 = np.empty(6)
+    v6 = np.empty(6)
+    out = np.empty(3)
+    eel = 0.0
+    pvisc = 0.0
+    pact = 0.0
+    for e in range(ne):
+        for j in range(6):
+            q6[j] = q[3 * e + j]
+            v6[j] = vrel[3 * e + j]
+        taud = 1.0
+        if flags & F_MUSCLE:
+            taud = 1.0 - P[P_AMP] * a * E[e, E_SMUS]
+        element_force(flags, q6, v6, E[e], taud, P, B, f6, out)
+        eel += out[0]
+        pvisc += out[1]
+        if flags & F_MUSCLE:
+            # dW/dt at fixed q: dW/dtau_d * dtau_d/dt = (-s22 tau_d) * (-amp adot s)
+            pact += out[2] * taud * P[P_AMP] * adot * E[e, E_SMUS]
+        for j in range(6):
+            F[3 * e + j] += f6[j]
+    # cable: radial inward force with weights wc (sum 1 over free radial dofs)
+    if flags & F_CABLE:
+        fc = amp_cmd
+        if flags & F_ROUTINE:
+            fc = P[P_AMP] * a
+        for i in range(n1):
+            f = -fc * Nd[i, N_WC]
+            F[3 * i] += f
+            pact += f * vrel[3 * i]
+    # tangential quadratic drag relative to the water (absolute velocity)
+    pdrag = 0.0
+    if flags & F_DRAG:
+        cdr = 0.5 * P[P_RHO] * P[P_CT]
+        for i in range(n1):
+            if Nd[i, N_FIXZ] > 0.5:
+                continue
+            th = q[3 * i + 2]
+            c = math.cos(th)
+            s = math.sin(th)
+            vt = vrel[3 * i] * c + (vrel[3 * i + 1] + U) * s
+            f = -cdr * Nd[i, N_DAREA] * abs(vt) * vt
+            F[3 * i] += f * c * (1.0 - Nd[i, N_FIXR])
+            F[3 * i + 1] += f * s
+            pdrag -= f * vt
+    # cavity volume and pressure
+    V = volume_grad(q, n1, gV)
+    Vdot = 0.0
+    for k in range(n):
+        Vdot += gV[k] * vrel[k]
+    p = 0.0
+    if flags & F_JET:
+        p, uj, thr, ram, pj, po = jet_terms(Vdot, U, P)
+        for k in range(n):
+            F[k] += p * gV[k]
+    rmax = 0.0
+    for i in range(n1):
+        if q[3 * i] > rmax:
+            rmax = q[3 * i]
+    st[T_EEL] = eel
+    st[T_PVISC] = pvisc
+    st[T_PDRAG] = pdrag
+    st[T_VOL] = V
+    st[T_VDOT] = Vdot
+    st[T_P] = p
+    st[T_PACT] = pact
+    st[T_FRING] = F[3 * (n1 - 1) + 1]
+    st[T_RMAX] = rmax
+
+
+@njit(cache=True)
+def body_terms(flags, st, U, P):
+    """Vehicle: returns (accel, thrust, body drag (signed, opposes U), ram, P_jet_out, P_other, m)."""
+    rho = P[P_RHO]
+    thr = 0.0; ram = 0.0; pj = 0.0; po = 0.0
+    if flags & F_JET:
+        p, uj, thr, ram, pj, po = jet_terms(st[T_VDOT], U, P)
+        m = P[P_MBODY] + rho * st[T_VOL]
+    else:
+        m = P[P_MBODY] + rho * P[P_V0]
+    drag = 0.0
+    if flags & F_DRAG:
+        drag = -0.5 * P[P_CD] * rho * math.pi * st[T_RMAX] * st[T_RMAX] * abs(U) * U
+    acc = 0.0
+    if flags & F_BODY:
+        acc = (thr + drag - ram + st[T_FRING]) / m
+    return acc, thr, drag, ram, pj, po, m
+
+
+@njit(cache=True)
+def apply_minv(Nd, F, out):
+    """out = M^-1 F on free dofs (2x2 node blocks for (r, w), scalar for theta), 0 on fixed."""
+    n1 = Nd.shape[0]
+    for i in range(n1):
+        fr = F[3 * i] * (1.0 - Nd[i, N_FIXR])
+        fz = F[3 * i + 1] * (1.0 - Nd[i, N_FIXZ])
+        a = Nd[i, N_MRR]; b = Nd[i, N_MRZ]; d = Nd[i, N_MZZ]
+        if Nd[i, N_FIXR] > 0.5 and Nd[i, N_FIXZ] > 0.5:
+            out[3 * i] = 0.0; out[3 * i + 1] = 0.0
+        elif Nd[i, N_FIXR] > 0.5:
+            out[3 * i] = 0.0; out[3 * i + 1] = fz / d
+        elif Nd[i, N_FIXZ] > 0.5:
+            out[3 * i] = fr / a; out[3 * i + 1] = 0.0
+        else:
+            det = a * d - b * b
+            out[3 * i] = (d * fr - b * fz) / det
+            out[3 * i + 1] = (a * fz - b * fr) / det
+        out[3 * i + 2] = 0.0 if Nd[i, N_FIXT] > 0.5 else F[3 * i + 2] / Nd[i, N_MTT]
+
+
+@njit(cache=True)
+def kinetic(Nd, v, U, P, V, flags):
+    """(shell kinetic incl. rotation, normal added-mass kinetic [included in the node mass blocks],
+    vehicle 1/2 M U^2, internal fluid 1/2 rho V U^2).  The node blocks are
+    M = m I + m_a n0 n0^T, so the added-mass part is split off with the shell's own mass m."""
+    n1 = Nd.shape[0]
+    ksh = 0.0
+    for i in range(n1):
+        vr = v[3 * i] * (1.0 - Nd[i, N_FIXR])
+        vz = v[3 * i + 1] * (1.0 - Nd[i, N_FIXZ])
+        vt = v[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
+        ksh += 0.5 * (Nd[i, N_MRR] * vr * vr + 2 * Nd[i, N_MRZ] * vr * vz + Nd[i, N_MZZ] * vz * vz
+                      + Nd[i, N_MTT] * vt * vt)
+    kveh = 0.5 * P[P_MBODY] * U * U
+    if flags & F_JET:
+        kint = 0.5 * P[P_RHO] * V * U * U
+    else:
+        kint = 0.5 * P[P_RHO] * P[P_V0] * U * U
+    return ksh, kveh, kint
+
+
+# ---------------------------------------------------------------------------------------------
+# banded linear algebra (no pivoting: the Newton matrix M/alpha - dt(alpha dt K + C) is
+# dominated by its positive mass and stiffness diagonal)
+@njit(cache=True)
+def band_lu(A, n, bw):
+    for k in range(n):
+        piv = A[k, bw]
+        if piv == 0.0 or not math.isfinite(piv):
+            return False
+        for i in range(k + 1, min(n, k + bw + 1)):
+            l = A[i, k - i + bw] / piv
+            if l == 0.0:
+                continue
+            A[i, k - i + bw] = l
+            for j in range(k + 1, min(n, k + bw + 1)):
+                A[i, j - i + bw] -= l * A[k, j - k + bw]
+    return True
+
+
+@njit(cache=True)
+def band_solve(A, n, bw, b, x):
+    for i in range(n):
+        s = b[i]
+        for k in range(max(0, i - bw), i):
+            s -= A[i, k - i + bw] * x[k]
+        x[i] = s
+    for i in range(n - 1, -1, -1):
+        s = x[i]
+        for j in range(i + 1, min(n, i + bw + 1)):
+            s -= A[i, j - i + bw] * x[j]
+        x[i] = s / A[i, bw]
+
+
+@njit(cache=True)
+def fixed_dof(Nd, k):
+    i = k // 3
+    c = k - 3 * i
+    if c == 0:
+        return Nd[i, N_FIXR] > 0.5
+    if c == 1:
+        return Nd[i, N_FIXZ] > 0.5
+    return Nd[i, N_FIXT] > 0.5
+
+
+@njit(cache=True)
+def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
+    """Banded stiffness K = dF/dq (forward differences of the element forces, incl. the
+    geometric part) and damping C = dF/dv (exact viscous -B^T D_v B, drag 2x2 blocks).
+    The rank-one pressure term is handled separately (Sherman-Morrison)."""
+    n1 = Nd.shape[0]
+    ne = n1 - 1
+    K[:, :] = 0.0
+    C[:, :] = 0.0
+    a = 1.0
+    if flags & F_ROUTINE:
+        a, adot = routine(t, P)
+    B = np.empty((5, 6))
+    f0 = np.empty(6)
+    f1 = np.empty(6)
+    q6 = np.empty(6)
+    v6 = np.empty(6)
+    out = np.empty(3)
+    A = np.zeros((5, 5))
+    for e in range(ne):
+        for j in range(6):
+            q6[j] = q[3 * e + j]
+            v6[j] = vrel[3 * e + j]
+        taud = 1.0
+        if flags & F_MUSCLE:
+            taud = 1.0 - P[P_AMP] * a * E[e, E_SMUS]
+        element_force(flags, q6, v6, E[e], taud, P, B, f0, out)
+        for j in range(6):
+            h = 1e-7 * (1.0 + abs(q6[j]))
+            qs = q6[j]
+            q6[j] = qs + h
+            element_force(flags, q6, v6, E[e], taud, P, B, f1, out)
+            q6[j] = qs
+            for i2 in range(6):
+                K[3 * e + i2, 3 * e + j - (3 * e + i2) + BW] += (f1[i2] - f0[i2]) / h
+        if flags & F_VISC:
+            element_strain(q6, E[e, E_DS], E[e, E_R0M], E[e, E_LAM0], E[e, E_ETA0], E[e, E_K0],
+                           E[e, E_VS0], taud, B)
+            Ar = E[e, E_AREA]
+            psi2 = P[P_PSI2]
+            nu = P[P_NU]
+            pj2 = psi2 * P[P_JS]
+            A[0, 0] = Ar * psi2; A[0, 1] = Ar * psi2 * nu; A[1, 0] = A[0, 1]; A[1, 1] = A[0, 0]
+            A[2, 2] = Ar * P[P_GV]
+            A[3, 3] = Ar * pj2; A[3, 4] = Ar * pj2 * nu; A[4, 3] = A[3, 4]; A[4, 4] = A[3, 3]
+            for i2 in range(6):
+                for j in range(6):
+                    s = 0.0
+                    for k1 in range(5):
+                        bk = B[k1, i2]
+                        if bk == 0.0:
+                            continue
+                        for k2 in range(5):
+                            s += bk * A[k1, k2] * B[k2, j]
+                    C[3 * e + i2, j - i2 + BW] -= s
+    if flags & F_DRAG:
+        cdr = 0.5 * P[P_RHO] * P[P_CT]
+        for i in range(n1):
+            if Nd[i, N_FIXZ] > 0.5:
+                continue
+            th = q[3 * i + 2]
+            c = math.cos(th)
+            s = math.sin(th)
+            vt = vrel[3 * i] * c + (vrel[3 * i + 1] + U) * s
+            k = -2.0 * cdr * Nd[i, N_DAREA] * abs(vt)
+            C[3 * i, BW] += k * c * c
+            C[3 * i, 1 + BW] += k * c * s
+            C[3 * i + 1, -1 + BW] += k * c * s
+            C[3 * i + 1, BW] += k * s * s
+
+
+@njit(cache=True)
+def _check(q, v, n1, P):
+    for k in range(6 * n1):
+        if not math.isfinite(q[k] if k < 3 * n1 else v[k - 3 * n1]):
+            return ERR_NONFINITE
+    for i in range(n1):
+        if q[3 * i] < -P[P_RLIM]:
+            return ERR_AXIS
+        if abs(q[3 * i]) > P[P_QLIM] or abs(q[3 * i + 1]) > P[P_QLIM]:
+            return ERR_BOUNDS
+    for k in range(3 * n1):
+        if abs(v[k]) > P[P_VLIM]:
+            return ERR_BOUNDS
+    return OK
+
+
+@njit(cache=True)
+def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
+    n1 = Nd.shape[0]
+    n = 3 * n1
+    tail = 6 * n1
+    dt = P[P_DT]
+    F = np.zeros(n)
+    gV = np.zeros(n)
+    vrel = np.zeros(n)
+    st = np.zeros(N_STATS)
+    acc = np.zeros(n)
+    qn = np.empty(n)
+    vn = np.empty(n)
+    q1 = np.empty(n)
+    v1 = np.empty(n)
+    vs = np.empty(n)
+    R = np.empty(n)
+    dv = np.empty(n)
+    zz = np.empty(n)
+    gf = np.empty(n)
+    K = np.zeros((n, 2 * BW + 1))
+    C = np.zeros((n, 2 * BW + 1))
+    J = np.zeros((n, 2 * BW + 1))
+    alpha = P[P_ALPHA]
+    maxit = int(P[P_MAXIT])
+    for step in range(n_steps):
+        t = time0 + step * dt
+        for k in range(n):
+            qn[k] = state[k]
+            vn[k] = state[n + k]
+        U = state[tail + S_U]
+        if not (flags & F_BODY):
+            U = 0.0
+        x = state[tail + S_X]
+        if scheme == 0:
+            # ---- explicit kick-drift-kick (velocity Verlet; velocity-dependent forces use the
+            # velocity available at each kick)
+            forces(flags, qn, vn, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st)
+            a0, thr0, dr0, ram0, pj0, po0, m0 = body_terms(flags, st, U, P)
+            pv0 = st[T_PVISC]; pd0 = st[T_PDRAG] - dr0 * U; pa0 = st[T_PACT]
+            apply_minv(Nd, F, acc)
+            for k in range(n):
+                vs[k] = vn[k] + 0.5 * dt * acc[k]
+            Uh = U + 0.5 * dt * a0
+            for i in range(n1):
+                q1[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
+                q1[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Uh) * (1.0 - Nd[i, N_FIXZ])
+                q1[3 * i + 2] = qn[3 * i + 2] + dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
+            forces(flags, q1, vs, Uh, t + dt, amp_cmd, E, Nd, P, F, gV, vrel, st)
+            a1, thr1, dr1, ram1, pj1, po1, m1 = body_terms(flags, st, Uh, P)
+            apply_minv(Nd, F, acc)
+            for k in range(n):
+                v1[k] = vs[k] + 0.5 * dt * acc[k]
+            U1 = Uh + 0.5 * dt * a1
+            code = _check(q1, v1, n1, P)
+            if code != OK:
+                return step, code
+            state[tail + S_IN] += 0.5 * dt * (pa0 + st[T_PACT])
+            state[tail + S_VISC] += 0.5 * dt * (pv0 + st[T_PVISC])
+            state[tail + S_DRAG] += 0.5 * dt * (pd0 + st[T_PDRAG] - dr1 * Uh)
+            state[tail + S_JET] += 0.5 * dt * (pj0 + pj1)
+            state[tail + S_OTHER] += 0.5 * dt * (po0 + po1)
+            thr, dr, pres, vol, vdot, acc_b = thr1, dr1, st[T_P], st[T_VOL], st[T_VDOT], a1
+        else:
+            # ---- implicit theta-scheme on the shell: v* at q* = q_n + alpha dt v*_rel,
+            # M (v* - v_n)/alpha = dt F(q*, v*); alpha = 1/2 implicit midpoint, 1 backward Euler.
+            # The vehicle speed is predicted (U* = U_n + alpha dt a_n) and corrected afterwards.
+            Us = U + alpha * dt * state[tail + S_A]
+            if not (flags & F_BODY):
+                Us = 0.0
+            ts = t + alpha * dt
+            for k in range(n):
+                vs[k] = vn[k]
+            have_lu = False
+            converged = False
+            prev = 1e300
+            pcoef = 0.0
+            for it in range(maxit):
+                for i in range(n1):
+                    q1[3 * i] = qn[3 * i] + alpha * dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
+                    q1[3 * i + 1] = qn[3 * i + 1] + alpha * dt * (vs[3 * i + 1] - Us) * (1.0 - Nd[i, N_FIXZ])
+                    q1[3 * i + 2] = qn[3 * i + 2] + alpha * dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
+                forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
+                # residual R = M (v* - v_n)/alpha - dt F  (free dofs)
+                for i in range(n1):
+                    dr_ = (vs[3 * i] - vn[3 * i]) / alpha
+                    dz_ = (vs[3 * i + 1] - vn[3 * i + 1]) / alpha
+                    dt_ = (vs[3 * i + 2] - vn[3 * i + 2]) / alpha
+                    R[3 * i] = Nd[i, N_MRR] * dr_ + Nd[i, N_MRZ] * dz_ - dt * F[3 * i]
+                    R[3 * i + 1] = Nd[i, N_MRZ] * dr_ + Nd[i, N_MZZ] * dz_ - dt * F[3 * i + 1]
+                    R[3 * i + 2] = Nd[i, N_MTT] * dt_ - dt * F[3 * i + 2]
+                for k in range(n):
+                    if fixed_dof(Nd, k):
+                        R[k] = 0.0
+                        gf[k] = 0.0
+                    else:
+                        gf[k] = gV[k]
+                if not have_lu:
+                    assemble_KC(flags, q1, vrel, Us, ts, E, Nd, P, K, C)
+                    for k in range(n):
+                        for j in range(2 * BW + 1):
+                            J[k, j] = -dt * (alpha * dt * K[k, j] + C[k, j])
+                    for i in range(n1):
+                        J[3 * i, BW] += Nd[i, N_MRR] / alpha
+                        J[3 * i, BW + 1] += Nd[i, N_MRZ] / alpha
+                        J[3 * i + 1, BW - 1] += Nd[i, N_MRZ] / alpha
+                        J[3 * i + 1, BW] += Nd[i, N_MZZ] / alpha
+                        J[3 * i + 2, BW] += Nd[i, N_MTT] / alpha
+                    for k in range(n):
+                        if fixed_dof(Nd, k):
+                            for j in range(2 * BW + 1):
+                                J[k, j] = 0.0
+                                kk = k + j - BW
+                                if 0 <= kk < n:
+                                    J[kk, k - kk + BW] = 0.0
+                            J[k, BW] = 1.0
+                    if not band_lu(J, n, BW):
+                        return step, ERR_NEWTON
+                    # pressure rank one: + dt rho |V'|/A^2 g g^T
+                    pcoef = 0.0
+                    if flags & F_JET:
+                        Aj = P[P_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
+                        pcoef = dt * P[P_RHO] * abs(st[T_VDOT]) / (Aj * Aj)
+                        band_solve(J, n, BW, gf, zz)
+                    have_lu = True
+                band_solve(J, n, BW, R, dv)
+                if pcoef > 0.0:
+                    gy = 0.0
+                    gz = 0.0
+                    for k in range(n):
+                        gy += gf[k] * dv[k]
+                        gz += gf[k] * zz[k]
+                    fac = pcoef * gy / (1.0 + pcoef * gz)
+                    for k in range(n):
+                        dv[k] -= fac * zz[k]
+                dmax = 0.0
+                vmax = 0.0
+                for k in range(n):
+                    vs[k] -= dv[k]
+                    if abs(dv[k]) > dmax:
+                        dmax = abs(dv[k])
+                    if abs(vs[k]) > vmax:
+                        vmax = abs(vs[k])
+                if not math.isfinite(dmax):
+                    return step, ERR_NEWTON
+                if dmax <= 1e-12 + P[P_TOL] * vmax:
+                    converged = True
+                    break
+                if dmax > 0.3 * prev:
+                    have_lu = False   # slow contraction: refresh the Jacobian
+                prev = dmax
+            if not converged:
+                return step, ERR_NEWTON
+            for i in range(n1):
+                q1[3 * i] = qn[3 * i] + alpha * dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
+                q1[3 * i + 1] = qn[3 * i + 1] + alpha * dt * (vs[3 * i + 1] - Us) * (1.0 - Nd[i, N_FIXZ])
+                q1[3 * i + 2] = qn[3 * i + 2] + alpha * dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
+            forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
+            acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
+            for i in range(n1):
+                q1[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
+                q1[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Us) * (1.0 - Nd[i, N_FIXZ])
+                q1[3 * i + 2] = qn[3 * i + 2] + dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
+            for k in range(n):
+                v1[k] = 0.0 if fixed_dof(Nd, k) else vn[k] + (vs[k] - vn[k]) / alpha
+            U1 = U + dt * acc_b
+            Uh = Us
+            code = _check(q1, v1, n1, P)
+            if code != OK:
+                return step, code
+            state[tail + S_IN] += dt * st[T_PACT]
+            state[tail + S_VISC] += dt * st[T_PVISC]
+            state[tail + S_DRAG] += dt * (st[T_PDRAG] - dr * Us)
+            state[tail + S_JET] += dt * pj
+            state[tail + S_OTHER] += dt * po
+            pres, vol, vdot = st[T_P], st[T_VOL], st[T_VDOT]
+        if not (flags & F_BODY):
+            U1 = 0.0
+            Uh = 0.0
+            acc_b = 0.0
+        for k in range(n):
+            state[k] = q1[k]
+            state[n + k] = v1[k]
+        state[tail + S_X] = x + dt * Uh
+        state[tail + S_U] = U1
+        state[tail + S_A] = acc_b
+        state[tail + S_THR] = thr
+        state[tail + S_BDRAG] = dr
+        state[tail + S_P] = pres
+        state[tail + S_VOL] = vol
+        state[tail + S_VDOT] = vdot
+        state[tail + S_TIME] = t + dt
+        if flags & F_JET:
+            state[tail + S_UJ] = -vdot / (P[P_AOUT] if vdot < 0 else P[P_AIN])
+    return n_steps, OK
+
+
+@njit(cache=True)
+def advance(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
+    """Advance ``state`` in place by ``n_steps``; returns (steps done, status code).  The state
+    is only written after a step passed its checks, so it is left at the last good step."""
+    return _advance_impl(literally(flags), state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
+
+
+@njit(cache=True)
+def evaluate(flags, state, t, amp_cmd, E, Nd, P):
+    """Stats at the stored state (energy, volume, ...) for observation and the ledger."""
+    n1 = Nd.shape[0]
+    n = 3 * n1
+    F = np.zeros(n)
+    gV = np.zeros(n)
+    vrel = np.zeros(n)
+    st = np.zeros(N_STATS)
+    U = state[6 * n1 + S_U]
+    forces(flags, state[:n], state[n:2 * n], U, t, amp_cmd, E, Nd, P, F, gV, vrel, st)
+    ksh, kveh, kint = kinetic(Nd, state[n:2 * n], U, P, st[T_VOL], flags)
+    return st, ksh, kveh, kint
+
+
+@njit(cache=True)
+def stiffness_damping(flags, state, t, E, Nd, P):
+    """Banded K and C at the stored state (for the stable-step estimate)."""
+    n1 = Nd.shape[0]
+    n = 3 * n1
+    F = np.zeros(n)
+    gV = np.zeros(n)
+    vrel = np.zeros(n)
+    st = np.zeros(N_STATS)
+    U = state[6 * n1 + S_U]
+    forces(flags, state[:n], state[n:2 * n], U, t, 0.0, E, Nd, P, F, gV, vrel, st)
+    K = np.zeros((n, 2 * BW + 1))
+    C = np.zeros((n, 2 * BW + 1))
+    assemble_KC(flags, state[:n], vrel, U, t, E, Nd, P, K, C)
+    return K, C

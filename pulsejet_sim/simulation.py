@@ -1,0 +1,62 @@
+"""The one stepping loop that sim_node, the offline runner, the tests and the benchmarks share."""
+from __future__ import annotations
+
+import numpy as np
+
+from pulsejet_sim.models.base import Command, Observation, SimulationBlowUp
+
+
+class Simulation:
+    """Mutable state of one run of an immutable model (MuJoCo's model/data split)."""
+
+    def __init__(self, model, command: Command | None = None):
+        self.model = model
+        self.default_command = command or getattr(model, 'initial_command', Command())
+        self.reset()
+
+    def reset(self) -> Observation:
+        """Back to the scene's initial state, time zero, ledger cleared."""
+        self.initial_state = self.model.initial_state()
+        self.state = self.initial_state.copy()
+        self.steps = 0
+        self.command = self.default_command
+        self.fault: str | None = None
+        return self.observe()
+
+    @property
+    def time_s(self) -> float:
+        # integer step count times dt: no drift over long runs
+        return self.steps * self.model.dt_s
+
+    def step(self, n_steps: int, command: Command | None = None) -> Observation:
+        """Advance n_steps physics steps holding `command`; raises SimulationBlowUp (state kept at
+        the last good step, further steps refused until reset)."""
+        if self.fault is not None:
+            raise SimulationBlowUp(f'simulation is stopped after a fault: {self.fault}; reset to continue',
+                                   self.time_s)
+        if command is not None:
+            self.command = command
+        if n_steps > 0:
+            try:
+                done = self.model.advance(self.state, self.time_s, n_steps, self.command)
+            except SimulationBlowUp as err:
+                self.steps = int(round(err.time_s / self.model.dt_s))
+                self.fault = str(err)
+                raise
+            self.steps += done
+        return self.observe()
+
+    def observe(self) -> Observation:
+        return self.model.observe(self.state, self.time_s, self.command)
+
+    def energy_ledger(self) -> dict[str, float]:
+        return self.model.energy_ledger(self.state, self.initial_state)
+
+    def profile(self):
+        return self.model.profile(self.state)
+
+    def stable_step_s(self) -> float:
+        return self.model.stable_step_s(self.state)
+
+    def snapshot(self) -> np.ndarray:
+        return self.state.copy()
