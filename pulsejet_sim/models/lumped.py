@@ -31,7 +31,7 @@ TERM_BITS = {
 }
 
 SIMULATION_SPEC = {
-    'dt_s': Number(1e-4, 1e-7, 1e-2, low_open=False, unit='s'),
+    'dt_s': Number(1e-4, 1e-7, 0.1, unit='s'),
     'duration_s': Number(10.0, 0.0, 1e6, low_open=True, unit='s'),
     'publish_rate_hz': Number(100.0, 1.0, 10000.0, unit='Hz'),
 }
