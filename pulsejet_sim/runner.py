@@ -8,7 +8,9 @@ from pathlib import Path
 
 from pulsejet_ctrl.routines import routine_from_scene
 from pulsejet_sim import messages
-from pulsejet_sim.bag.writer import BagWriter
+import threading
+
+from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
 from pulsejet_sim.models.base import Command
 from pulsejet_sim.scene import Scene
 from pulsejet_sim.simulation import Simulation
@@ -42,8 +44,12 @@ def run_scene(scene: Scene, duration_s: float | None = None, out: str | Path | N
     total_batches = int(math.ceil(duration_s / (batch * scene.model.dt_s) - 1e-9))
     ledger_every = max(1, int(round(LEDGER_PERIOD_S / (batch * scene.model.dt_s))))
     writer = BagWriter(out) if out is not None else None
+    # Ctrl-C or SIGTERM during a long offline run still leaves a complete, readable file
+    restore_signals = (install_signal_handlers(writer)
+                       if writer is not None and threading.current_thread() is threading.main_thread() else None)
     fault = None
     published = 0
+    last_applied = None
     try:
         obs = sim.observe()
         _write_state(writer, obs, sim)
@@ -53,6 +59,10 @@ def run_scene(scene: Scene, duration_s: float | None = None, out: str | Path | N
                 ns = messages.stamp_ns(sim.time_s)
                 for topic, msg in messages.command_messages(command):
                     writer.write_message(topic, msg, ns)
+                if command != last_applied:
+                    writer.write_message(messages.TOPIC_APPLIED_COMMAND,
+                                         messages.applied_command_message(command, sim.time_s), ns)
+                    last_applied = command
             try:
                 obs = sim.step(batch, command)
             except Exception as err:   # SimulationBlowUp: stop, keep what was good
@@ -69,6 +79,8 @@ def run_scene(scene: Scene, duration_s: float | None = None, out: str | Path | N
                                      messages.ledger_message(sim.energy_ledger(), sim.time_s),
                                      messages.stamp_ns(sim.time_s))
             writer.close()
+        if restore_signals is not None:
+            restore_signals()
     return RunResult(path=Path(out) if out is not None else None, sim=sim, publications=published, fault=fault)
 
 

@@ -1,0 +1,239 @@
+"""Summary numbers and a 4-panel plot of a pulsejet MCAP recording (live or offline).
+
+Reads with pulsejet_sim.bag.reader (no rclpy). Time axes are simulation time (header stamps, or
+log times mapped through /clock; see reader.load_series). Integrals use the trapezoidal rule over
+the recorded samples, so their accuracy is that of the publishing rate.
+
+cli.py calls main_summary(argv) / main_plot(argv); both return a process exit code (2 on bad input,
+with a one-line error naming the file and what was expected).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from pulsejet_sim.bag.reader import BagInfo, BagReadError, find_topic, iter_bag, load_series
+
+VELOCITY = 'pulsejet/velocity'
+THRUST = 'pulsejet/thrust'
+MANTLE_RADIUS = 'pulsejet/mantle_radius'
+VOLUME = 'pulsejet/volume'
+FLUID_MASS = 'pulsejet/fluid_mass'
+ENERGY_LEDGER = 'pulsejet/energy_ledger'
+LEDGER_STATUS_NAME = 'pulsejet energy ledger'   # same as messages.LEDGER_STATUS_NAME (no rclpy here)
+PULSEJET_TOPICS = (VELOCITY, THRUST, MANTLE_RADIUS, VOLUME, FLUID_MASS, ENERGY_LEDGER)
+
+
+class AnalysisError(ValueError):
+    """The file is readable but holds nothing to analyse (names the file and what was expected)."""
+
+
+def _trapz(y: np.ndarray, t: np.ndarray) -> float:
+    if len(t) < 2:
+        return 0.0
+    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)))
+
+
+def _final_ledger(path: Path, topic: str) -> tuple[dict[str, float], str]:
+    """Ledger (J) and level name of the last energy-ledger message; ({}, '') when there is none."""
+    ledger: dict[str, float] = {}
+    level = ''
+    levels = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
+    for _, _, _, msg in iter_bag(path, topics=[topic]):
+        if not hasattr(msg, 'status'):
+            continue
+        for status in msg.status:
+            if status.name != LEDGER_STATUS_NAME:
+                continue
+            ledger = {}
+            for kv in status.values:
+                try:
+                    ledger[kv.key] = float(kv.value)
+                except ValueError:
+                    ledger[kv.key] = math.nan
+            raw = status.level
+            code = raw[0] if isinstance(raw, (bytes, bytearray)) else int(raw)
+            level = levels.get(code, str(code))
+    return ledger, level
+
+
+def summarize(path: str | Path) -> dict[str, Any]:
+    """Key numbers of a run. Units in the key names; NaN where the topic needed is absent.
+
+    peak_speed_m_s: max |v|; mean_speed_m_s: time average of |v|; distance_m: net forward travel
+    ∫v dt; thrust_impulse_n_s: ∫thrust dt; duration_s: span of simulation time covered;
+    fluid_mass_min_kg / _max_kg; message_counts: per stored topic; energy_ledger_j: last ledger;
+    energy_ledger_level: its diagnostic level (OK / WARN). Raises BagReadError / AnalysisError.
+    """
+    p = Path(path)
+    info = BagInfo(p)
+    series = load_series(p, info=info)
+    present = [rel for rel in PULSEJET_TOPICS if find_topic(info.topics, rel)]
+    if not present:
+        raise AnalysisError(f'{str(p)!r} has no pulsejet topics (found {sorted(info.topics) or "none"}); '
+                            f'expected some of {", ".join(PULSEJET_TOPICS)}')
+
+    def get(rel: str) -> tuple[np.ndarray, np.ndarray] | None:
+        name = find_topic(series, rel)
+        return series[name] if name else None
+
+    out: dict[str, Any] = {'file': str(p), 'truncated': info.truncated}
+    # Simulation-time span: header-stamped topics are exact, /clock next, log-time-mapped ones last.
+    span = None
+    for group in ((VELOCITY, THRUST), ('/clock',), (MANTLE_RADIUS, VOLUME, FLUID_MASS)):
+        times = [get(rel)[0] for rel in group if get(rel) is not None and len(get(rel)[0])]
+        if times:
+            span = (min(t[0] for t in times), max(t[-1] for t in times))
+            break
+    out['start_time_s'] = float(span[0]) if span else math.nan
+    out['duration_s'] = float(span[1] - span[0]) if span else math.nan
+
+    velocity = get(VELOCITY)
+    if velocity is not None and len(velocity[0]):
+        t, v = velocity
+        span = t[-1] - t[0]
+        out['peak_speed_m_s'] = float(np.max(np.abs(v)))
+        out['mean_speed_m_s'] = _trapz(np.abs(v), t) / span if span > 0 else float(np.abs(v).mean())
+        out['distance_m'] = _trapz(v, t)
+        out['final_velocity_m_s'] = float(v[-1])
+    else:
+        out.update(peak_speed_m_s=math.nan, mean_speed_m_s=math.nan, distance_m=math.nan,
+                   final_velocity_m_s=math.nan)
+
+    thrust = get(THRUST)
+    if thrust is not None and len(thrust[0]):
+        out['thrust_impulse_n_s'] = _trapz(thrust[1], thrust[0])
+        out['peak_thrust_n'] = float(np.max(thrust[1]))
+    else:
+        out.update(thrust_impulse_n_s=math.nan, peak_thrust_n=math.nan)
+
+    mass = get(FLUID_MASS)
+    if mass is not None and len(mass[0]):
+        out['fluid_mass_min_kg'] = float(np.min(mass[1]))
+        out['fluid_mass_max_kg'] = float(np.max(mass[1]))
+    else:
+        out.update(fluid_mass_min_kg=math.nan, fluid_mass_max_kg=math.nan)
+
+    out['message_counts'] = dict(sorted(info.counts.items()))
+    ledger_topic = find_topic(info.topics, ENERGY_LEDGER)
+    ledger, level = _final_ledger(p, ledger_topic) if ledger_topic else ({}, '')
+    out['energy_ledger_j'] = ledger
+    out['energy_ledger_level'] = level
+    return out
+
+
+def _fmt(value: float, spec: str = '.6g') -> str:
+    return 'n/a' if value is None or (isinstance(value, float) and math.isnan(value)) else format(value, spec)
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """Human-readable table of summarize()'s output, with units."""
+    rows = [
+        ('file', summary.get('file', ''), ''),
+        ('duration', _fmt(summary.get('duration_s')), 's'),
+        ('peak speed', _fmt(summary.get('peak_speed_m_s')), 'm/s'),
+        ('mean speed', _fmt(summary.get('mean_speed_m_s')), 'm/s'),
+        ('distance travelled', _fmt(summary.get('distance_m')), 'm'),
+        ('thrust impulse', _fmt(summary.get('thrust_impulse_n_s')), 'N s'),
+        ('peak thrust', _fmt(summary.get('peak_thrust_n')), 'N'),
+        ('fluid mass min', _fmt(summary.get('fluid_mass_min_kg')), 'kg'),
+        ('fluid mass max', _fmt(summary.get('fluid_mass_max_kg')), 'kg'),
+    ]
+    width = max(len(r[0]) for r in rows)
+    lines = [f'{name:<{width}}  {value} {unit}'.rstrip() for name, value, unit in rows]
+    if summary.get('truncated'):
+        lines.append(f'{"note":<{width}}  file has no summary (writer killed hard); '
+                     'read up to the last complete chunk')
+    lines.append('')
+    lines.append('messages per topic')
+    counts = summary.get('message_counts', {})
+    tw = max((len(t) for t in counts), default=5)
+    lines += [f'  {topic:<{tw}}  {n}' for topic, n in counts.items()]
+    ledger = summary.get('energy_ledger_j') or {}
+    if ledger:
+        lines.append('')
+        lines.append(f'final energy ledger ({summary.get("energy_ledger_level") or "?"})')
+        kw = max(len(k) for k in ledger)
+        for key, value in ledger.items():
+            unit = '' if key == 'closure_relative' else 'J'
+            lines.append(f'  {key:<{kw}}  {_fmt(value, ".6g")} {unit}'.rstrip())
+    return '\n'.join(lines)
+
+
+def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
+    """PNG with 4 stacked panels against simulation time: mantle radius (mm), volume (ml),
+    velocity (m/s), thrust (N). Default output: the MCAP path with suffix .png. Returns its path."""
+    import matplotlib
+    matplotlib.use('Agg')  # no display needed; must precede pyplot
+    import matplotlib.pyplot as plt
+
+    p = Path(path)
+    info = BagInfo(p)
+    series = load_series(p, info=info)
+    panels = [(MANTLE_RADIUS, 1e3, 'mantle radius [mm]'), (VOLUME, 1e6, 'volume [ml]'),
+              (VELOCITY, 1.0, 'velocity [m/s]'), (THRUST, 1.0, 'thrust [N]')]
+    if not any(find_topic(series, rel) for rel, _, _ in panels):
+        raise AnalysisError(f'{str(p)!r} has no pulsejet state topics (found {sorted(info.topics) or "none"}); '
+                            f'expected some of {", ".join(rel for rel, _, _ in panels)}')
+    out = Path(png_path) if png_path is not None else p.with_suffix('.png')
+    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(8, 9), constrained_layout=True)
+    for ax, (rel, scale, label) in zip(axes, panels):
+        name = find_topic(series, rel)
+        if name is not None:
+            t, v = series[name]
+            ax.plot(t, v * scale, lw=1.0)
+        else:
+            ax.text(0.5, 0.5, f'{rel}: not recorded', transform=ax.transAxes, ha='center', va='center')
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+    axes[-1].set_xlabel('simulation time [s]')
+    axes[0].set_title(p.name)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out
+
+
+def _run(prog: str, argv: Sequence[str] | None, build, action) -> int:
+    parser = argparse.ArgumentParser(prog=prog)
+    build(parser)
+    args = parser.parse_args(argv)
+    try:
+        action(args)
+    except (BagReadError, AnalysisError) as exc:
+        print(f'{prog}: error: {exc}', file=sys.stderr)
+        return 2
+    except BrokenPipeError:     # output piped into `head`: nothing left to say
+        return 0
+    except OSError as exc:      # unreadable file or unwritable PNG path
+        if exc.filename is None:
+            raise
+        print(f'{prog}: error: {str(exc.filename)!r}: {exc.strerror}', file=sys.stderr)
+        return 2
+    return 0
+
+
+def main_summary(argv: Sequence[str] | None = None) -> int:
+    """`pulsejet summary FILE.mcap`: print the summary table. Returns the exit code."""
+    def build(parser: argparse.ArgumentParser) -> None:
+        parser.add_argument('file', help='MCAP recording (.mcap)')
+
+    def action(args: argparse.Namespace) -> None:
+        print(format_summary(summarize(args.file)))
+    return _run('pulsejet summary', argv, build, action)
+
+
+def main_plot(argv: Sequence[str] | None = None) -> int:
+    """`pulsejet plot FILE.mcap [--out PNG]`: write the 4-panel PNG and print its path."""
+    def build(parser: argparse.ArgumentParser) -> None:
+        parser.add_argument('file', help='MCAP recording (.mcap)')
+        parser.add_argument('--out', default=None, help='PNG path (default: FILE with .png suffix)')
+
+    def action(args: argparse.Namespace) -> None:
+        print(plot(args.file, args.out))
+    return _run('pulsejet plot', argv, build, action)

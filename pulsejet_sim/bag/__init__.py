@@ -1,0 +1,8 @@
+"""MCAP recordings in the rosbag2 layout: writer (needs the ROS .msg files), reader (needs neither rclpy
+nor the ROS packages: it decodes with the definitions stored in the file)."""
+from pulsejet_sim.bag.reader import (BagInfo, BagMessage, BagReadError, bag_info, find_topic, iter_bag,
+                                     load_series, read_bag, repair)
+from pulsejet_sim.bag.writer import BagError, BagWriter, install_signal_handlers, qos_profiles_yaml
+
+__all__ = ['BagError', 'BagInfo', 'BagMessage', 'BagReadError', 'BagWriter', 'bag_info', 'find_topic',
+           'install_signal_handlers', 'iter_bag', 'load_series', 'qos_profiles_yaml', 'read_bag', 'repair']

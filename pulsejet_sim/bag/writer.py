@@ -1,0 +1,337 @@
+"""MCAP writer laid out the way rosbag2 (rosbag2_storage_mcap, Jazzy) writes it.
+
+Layout: profile `ros2`; one schema per message type with encoding `ros2msg` and the complete
+definition text (msgdefs.full_text); one channel per topic with encoding `cdr` and metadata
+`offered_qos_profiles` / `topic_type_hash`; zstd- or lz4-compressed chunks with message indexes;
+summary (schemas, channels, statistics, chunk indexes) and a `rosbag2` metadata record on close.
+
+Crash safety:
+- close() is idempotent and also runs at interpreter exit;
+- install_signal_handlers(writer) closes the file on SIGINT/SIGTERM before the process exits;
+- chunks are bounded in size and age (flush_period_s) and flushed to the OS, so a hard kill
+  (SIGKILL, power loss aside) loses at most the open chunk; bag.reader reads such a truncated
+  file up to its last complete chunk and bag.reader.repair() rewrites it into a complete one.
+
+Topic names are stored fully qualified like rosbag2 ('pulsejet/velocity' -> '/pulsejet/velocity').
+"""
+from __future__ import annotations
+
+import atexit
+import contextlib
+import datetime
+import math
+import os
+import signal
+import threading
+import time
+import weakref
+from pathlib import Path
+from types import FrameType
+from typing import Any, Callable, Iterable, Iterator
+
+import yaml
+from mcap.writer import CompressionType, Writer
+
+from pulsejet_sim.bag import msgdefs
+
+LIBRARY = 'pulsejet_sim.bag (rosbag2_storage_mcap layout)'
+COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE}
+
+
+class BagError(RuntimeError):
+    """Misuse of a bag writer (unknown topic, write after close, ...); the message names the value."""
+
+
+def qualify_topic(topic: str) -> str:
+    """Fully qualified topic name as rosbag2 records it: 'pulsejet/velocity' -> '/pulsejet/velocity'."""
+    if not isinstance(topic, str) or not topic.strip('/') or ' ' in topic:
+        raise BagError(f'topic name {topic!r} is not a ROS topic name; expected e.g. "pulsejet/velocity"')
+    return topic if topic.startswith('/') else '/' + topic
+
+
+def type_name_of(msg: Any) -> str:
+    """'pkg/msg/Type' of an rclpy message instance (from its Python module path)."""
+    module = type(msg).__module__.split('.')  # e.g. std_msgs.msg._float64
+    if len(module) < 2:
+        raise BagError(f'{type(msg).__name__} is not a generated ROS message class')
+    return f'{module[0]}/{module[1]}/{type(msg).__name__}'
+
+
+class BagWriter:
+    """Write CDR-serialized ROS 2 messages to one MCAP file readable by rosbag2, rosbags and Foxglove.
+
+    Usage::
+
+        with BagWriter('run.mcap') as bag:
+            bag.add_topic('pulsejet/velocity', 'geometry_msgs/msg/TwistStamped')
+            bag.write('pulsejet/velocity', serialize_message(msg), log_time_ns)
+
+    Thread-safe: writes from several executor threads and a close() from another thread are serialized.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, compression: str = 'zstd',
+                 chunk_size_bytes: int = 256 * 1024, flush_period_s: float = 1.0) -> None:
+        if compression not in COMPRESSIONS:
+            raise BagError(f'compression={compression!r} not supported; allowed: {sorted(COMPRESSIONS)}')
+        if not (isinstance(chunk_size_bytes, int) and chunk_size_bytes > 0):
+            raise BagError(f'chunk_size_bytes={chunk_size_bytes!r} rejected; allowed: a positive integer')
+        if not (isinstance(flush_period_s, (int, float)) and flush_period_s > 0 and math.isfinite(flush_period_s)):
+            raise BagError(f'flush_period_s={flush_period_s!r} rejected; allowed: a positive finite number of s')
+        self.path = Path(path)
+        self.compression = compression
+        self.flush_period_s = float(flush_period_s)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.path, 'wb')
+        self._writer = Writer(self._file, chunk_size=chunk_size_bytes, compression=COMPRESSIONS[compression])
+        self._writer.start(profile='ros2', library=LIBRARY)
+        self._file.flush()
+        self._lock = threading.RLock()
+        self._schemas: dict[str, int] = {}            # type name -> schema id
+        self._channels: dict[str, int] = {}           # qualified topic -> channel id
+        self._topic_info: dict[str, dict[str, Any]] = {}
+        self._counts: dict[str, int] = {}
+        self._first_ns: int | None = None
+        self._last_ns: int | None = None
+        self._last_flush = time.monotonic()
+        self._closed = False
+        self._busy_thread: int | None = None          # thread id inside write(), for signal deferral
+        self._pending_signal: int | None = None
+        # Close at interpreter exit too (sys.exit, an uncaught exception), without keeping self alive.
+        self._atexit = _weak_close(self)
+        atexit.register(self._atexit)
+
+    # -- context manager ------------------------------------------------------------------------
+    def __enter__(self) -> 'BagWriter':
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- properties -----------------------------------------------------------------------------
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @property
+    def message_counts(self) -> dict[str, int]:
+        """Messages written per qualified topic name."""
+        with self._lock:
+            return dict(self._counts)
+
+    @property
+    def topics(self) -> dict[str, str]:
+        """Qualified topic name -> type name of every added topic."""
+        with self._lock:
+            return {t: info['type'] for t, info in self._topic_info.items()}
+
+    # -- writing --------------------------------------------------------------------------------
+    def add_topic(self, topic: str, type_name: str, offered_qos_profiles: str = '',
+                  definition: str | None = None) -> str:
+        """Register a topic (idempotent for the same type); returns the qualified name.
+
+        offered_qos_profiles: the YAML rosbag2 stores (see qos_profiles_yaml); '' when unknown.
+        definition: complete ros2msg text to store instead of the installed one (used by repair()).
+        Raises BagError for a topic re-added with another type, MessageDefinitionError when the
+        type's .msg files are not installed.
+        """
+        name = qualify_topic(topic)
+        msgdefs.split_type_name(type_name)
+        with self._mutating():
+            if name in self._channels:
+                if self._topic_info[name]['type'] != type_name:
+                    raise BagError(f'topic {name!r} already added with type '
+                                   f'{self._topic_info[name]["type"]!r}, not {type_name!r}')
+                return name
+            schema_id = self._schemas.get(type_name)
+            if schema_id is None:
+                text = definition if definition is not None else msgdefs.full_text(type_name)
+                schema_id = self._writer.register_schema(type_name, 'ros2msg', text.encode('utf-8'))
+                self._schemas[type_name] = schema_id
+            type_hash = msgdefs.type_hash(type_name)
+            metadata = {'offered_qos_profiles': offered_qos_profiles, 'topic_type_hash': type_hash}
+            self._channels[name] = self._writer.register_channel(name, 'cdr', schema_id, metadata)
+            self._topic_info[name] = {'type': type_name, 'qos': offered_qos_profiles, 'hash': type_hash}
+            self._counts[name] = 0
+            return name
+
+    def write(self, topic: str, cdr: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+        """Append one CDR-serialized message; log_time_ns is the receive (or simulation) time in ns."""
+        name = topic if topic in self._channels else qualify_topic(topic)
+        if not isinstance(log_time_ns, int) or log_time_ns < 0:
+            raise BagError(f'log_time_ns={log_time_ns!r} rejected; allowed: an integer >= 0 (ns)')
+        with self._mutating():
+            channel = self._channels.get(name)
+            if channel is None:
+                raise BagError(f'topic {name!r} not added; call add_topic first (added: {sorted(self._channels)})')
+            self._counts[name] += 1
+            self._writer.add_message(channel, log_time_ns, bytes(cdr),
+                                     log_time_ns if publish_time_ns is None else int(publish_time_ns),
+                                     sequence=self._counts[name])
+            self._first_ns = log_time_ns if self._first_ns is None else min(self._first_ns, log_time_ns)
+            self._last_ns = log_time_ns if self._last_ns is None else max(self._last_ns, log_time_ns)
+            if time.monotonic() - self._last_flush >= self.flush_period_s:
+                self._flush_locked()
+
+    @contextlib.contextmanager
+    def _mutating(self) -> Iterator[None]:
+        """Hold the lock and mark this thread busy, so a signal handler landing mid-record defers
+        the close to the end of the operation instead of cutting the record in half."""
+        pending = None
+        try:
+            with self._lock:
+                self._check_open()
+                outer = self._busy_thread is not None
+                self._busy_thread = threading.get_ident()
+                try:
+                    yield
+                finally:
+                    if not outer:
+                        self._busy_thread = None
+                        pending, self._pending_signal = self._pending_signal, None
+        finally:
+            if pending is not None:
+                self.close()
+                _redeliver(pending)
+
+    def write_message(self, topic: str, msg: Any, log_time_ns: int) -> None:
+        """Serialize an rclpy message and write it, adding the topic with the message's type if new."""
+        from rclpy.serialization import serialize_message  # rclpy only where rclpy messages are used
+        name = qualify_topic(topic)
+        if name not in self._channels:
+            self.add_topic(name, type_name_of(msg))
+        self.write(name, serialize_message(msg), log_time_ns)
+
+    def flush(self) -> None:
+        """Close the open chunk and push everything to the OS (a later hard kill cannot lose it)."""
+        if not self._closed:
+            with self._mutating():
+                self._flush_locked()
+
+    def flush_if_due(self) -> None:
+        """flush() if flush_period_s has passed since the last flush (call from a timer when idle)."""
+        if not self._closed and time.monotonic() - self._last_flush >= self.flush_period_s:
+            with self._mutating():
+                self._flush_locked()
+
+    def _flush_locked(self) -> None:
+        self._writer.flush()
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Write the summary and the rosbag2 metadata record and close the file. Idempotent."""
+        pending = None
+        with self._lock:
+            if self._closed:
+                return
+            self._busy_thread = threading.get_ident()  # a signal landing now is deferred, not re-entrant
+            try:
+                self._writer.add_metadata('rosbag2', {'serialized_metadata': self._rosbag2_metadata()})
+                self._writer.finish()
+                self._file.flush()
+                os.fsync(self._file.fileno())
+            finally:
+                self._closed = True
+                self._file.close()
+                atexit.unregister(self._atexit)
+                self._busy_thread = None
+                pending, self._pending_signal = self._pending_signal, None
+        if pending is not None:
+            _redeliver(pending)
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise BagError(f'bag {str(self.path)!r} is closed')
+
+    def _rosbag2_metadata(self) -> str:
+        """The `rosbag2_bagfile_information` YAML rosbag2 (metadata version 9) stores in the file."""
+        start = self._first_ns or 0
+        duration = (self._last_ns - start) if self._last_ns is not None else 0
+        total = sum(self._counts.values())
+        topics = []
+        for name, info in self._topic_info.items():
+            qos = yaml.safe_load(info['qos']) if info['qos'] else []
+            topics.append({'topic_metadata': {'name': name, 'type': info['type'], 'serialization_format': 'cdr',
+                                              'offered_qos_profiles': qos, 'type_description_hash': info['hash']},
+                           'message_count': self._counts[name]})
+        data = {'rosbag2_bagfile_information': {
+            'version': 9,
+            'storage_identifier': 'mcap',
+            'duration': {'nanoseconds': duration},
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': total,
+            'topics_with_message_count': topics,
+            'compression_format': '',
+            'compression_mode': '',
+            'relative_file_paths': [self.path.name],
+            'files': [{'path': self.path.name, 'starting_time': {'nanoseconds_since_epoch': start},
+                       'duration': {'nanoseconds': duration}, 'message_count': total}],
+            'custom_data': {'writer': LIBRARY,
+                            'closed_at': datetime.datetime.now(datetime.timezone.utc).isoformat()},
+            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+        }}
+        return yaml.safe_dump(data, sort_keys=False)
+
+
+def _weak_close(writer: BagWriter) -> Callable[[], None]:
+    ref = weakref.ref(writer)
+
+    def close() -> None:
+        w = ref()
+        if w is not None:
+            w.close()
+    return close
+
+
+def _redeliver(signum: int) -> None:
+    """Raise signum again with the handler that was in place before ours (KeyboardInterrupt for SIGINT,
+    termination for SIGTERM), so the process exits the way it would have without the bag."""
+    signal.raise_signal(signum)
+
+
+def qos_profiles_yaml(profiles: Iterable[Any]) -> str:
+    """rosbag2's `offered_qos_profiles` YAML for rclpy QoSProfile objects (e.g. from
+    node.get_publishers_info_by_topic(t)[i].qos_profile); '' for none."""
+    def duration(d: Any) -> dict[str, int]:
+        ns = int(getattr(d, 'nanoseconds', 0))
+        if ns <= 0 or ns >= 2**63 - 1:  # infinite / unset: rosbag2 writes RMW_DURATION_INFINITE
+            return {'sec': 9223372036, 'nsec': 854775807}
+        return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
+
+    def policy(p: Any) -> str:
+        return getattr(p, 'name', str(p)).lower()
+
+    items = [{
+        'history': policy(p.history), 'depth': int(p.depth), 'reliability': policy(p.reliability),
+        'durability': policy(p.durability), 'deadline': duration(p.deadline), 'lifespan': duration(p.lifespan),
+        'liveliness': policy(p.liveliness), 'liveliness_lease_duration': duration(p.liveliness_lease_duration),
+        'avoid_ros_namespace_conventions': bool(p.avoid_ros_namespace_conventions),
+    } for p in profiles]
+    return yaml.safe_dump(items, sort_keys=False).strip() if items else ''
+
+
+def install_signal_handlers(writer: BagWriter,
+                            signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> Callable[[], None]:
+    """Close `writer` on SIGINT/SIGTERM, then let the signal act as before (KeyboardInterrupt, exit).
+
+    Call from the main thread. If the signal lands while this thread is inside writer.write(), the
+    close is deferred to the end of that write so no record is cut in half. Returns a function
+    restoring the previous handlers. Not for processes where rclpy owns the signals (ROS nodes):
+    there, close the writer in a `finally` after spin returns.
+    """
+    previous = {s: signal.getsignal(s) for s in signals}
+
+    def restore() -> None:
+        for s, handler in previous.items():
+            signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        restore()
+        if writer._busy_thread == threading.get_ident():
+            writer._pending_signal = signum
+            return
+        writer.close()
+        _redeliver(signum)
+
+    for s in signals:
+        signal.signal(s, handler)
+    return restore

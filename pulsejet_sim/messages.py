@@ -1,0 +1,174 @@
+"""Simulation values -> ROS 2 messages, one function per kind of data.
+
+sim_node (live) and the offline runner both build their messages here, so live and offline
+recordings carry the same topics, types, frames and stamps. Topic names are relative (the node
+namespace applies), except `/clock`. Every header is stamped with simulation time.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import TwistStamped, WrenchStamped
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from pulsejet_sim.models.base import Command, Observation
+
+FRAME_ID = 'pulsejet/body'
+
+TOPIC_MANTLE_RADIUS = 'pulsejet/mantle_radius'
+TOPIC_VOLUME = 'pulsejet/volume'
+TOPIC_VELOCITY = 'pulsejet/velocity'
+TOPIC_THRUST = 'pulsejet/thrust'
+TOPIC_ENERGY_LEDGER = 'pulsejet/energy_ledger'
+TOPIC_FLUID_MASS = 'pulsejet/fluid_mass'
+TOPIC_CLOCK = '/clock'
+TOPIC_CMD_PUMP_FLOW = 'pulsejet/cmd/pump_flow'
+TOPIC_CMD_VALVE = 'pulsejet/cmd/valve'
+TOPIC_CMD_CABLE_FORCE = 'pulsejet/cmd/cable_force'
+# The command the simulator actually held from the stamped simulation time on (after validation):
+# what re-simulation replays step for step.
+TOPIC_APPLIED_COMMAND = 'pulsejet/applied_command'
+APPLIED_COMMAND_NAMES = ('pump_flow_m3_s', 'valve_opening', 'cable_force_n')
+
+# topic -> ROS type name, as in docs/ARCHITECTURE.md
+TOPIC_TYPES: dict[str, str] = {
+    TOPIC_MANTLE_RADIUS: 'std_msgs/msg/Float64',
+    TOPIC_VOLUME: 'std_msgs/msg/Float64',
+    TOPIC_VELOCITY: 'geometry_msgs/msg/TwistStamped',
+    TOPIC_THRUST: 'geometry_msgs/msg/WrenchStamped',
+    TOPIC_ENERGY_LEDGER: 'diagnostic_msgs/msg/DiagnosticArray',
+    TOPIC_FLUID_MASS: 'std_msgs/msg/Float64',
+    TOPIC_CLOCK: 'rosgraph_msgs/msg/Clock',
+    TOPIC_CMD_PUMP_FLOW: 'std_msgs/msg/Float64',
+    TOPIC_CMD_VALVE: 'std_msgs/msg/Float64',
+    TOPIC_CMD_CABLE_FORCE: 'std_msgs/msg/Float64',
+    TOPIC_APPLIED_COMMAND: 'sensor_msgs/msg/JointState',
+}
+STATE_TOPICS = (TOPIC_MANTLE_RADIUS, TOPIC_VOLUME, TOPIC_VELOCITY, TOPIC_THRUST, TOPIC_FLUID_MASS, TOPIC_CLOCK)
+COMMAND_TOPICS = (TOPIC_CMD_PUMP_FLOW, TOPIC_CMD_VALVE, TOPIC_CMD_CABLE_FORCE)
+
+LEDGER_STATUS_NAME = 'pulsejet energy ledger'
+LEDGER_HARDWARE_ID = 'pulsejet'
+LEDGER_WARN_RELATIVE = 0.05   # |closure_relative| above this -> WARN: energy books do not balance
+
+
+def message_class(topic: str) -> type:
+    """The rclpy message class of a topic in TOPIC_TYPES; ValueError names an unknown topic."""
+    classes = {'std_msgs/msg/Float64': Float64, 'geometry_msgs/msg/TwistStamped': TwistStamped,
+               'geometry_msgs/msg/WrenchStamped': WrenchStamped, 'rosgraph_msgs/msg/Clock': Clock,
+               'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray,
+               'sensor_msgs/msg/JointState': JointState}
+    try:
+        return classes[TOPIC_TYPES[topic]]
+    except KeyError:
+        raise ValueError(f'topic {topic!r} is not a pulsejet topic; allowed: {sorted(TOPIC_TYPES)}') from None
+
+
+def stamp(time_s: float) -> Time:
+    """Simulation time in s -> builtin_interfaces/Time (nanosecond resolution, rounded)."""
+    t = float(time_s)
+    if not math.isfinite(t) or t < 0.0 or t >= 2.0**31:
+        raise ValueError(f'time_s={time_s!r} rejected; allowed: a finite time in [0, 2^31) s')
+    total_ns = round(t * 1e9)
+    return Time(sec=total_ns // 1_000_000_000, nanosec=total_ns % 1_000_000_000)
+
+
+def stamp_ns(time_s: float) -> int:
+    """Simulation time in s -> integer ns (the log time the offline runner should use)."""
+    t = stamp(time_s)
+    return t.sec * 1_000_000_000 + t.nanosec
+
+
+def _float64(value: float) -> Float64:
+    return Float64(data=float(value))
+
+
+def observation_messages(obs: Observation, frame_id: str = FRAME_ID) -> list[tuple[str, Any]]:
+    """(topic, message) for every state topic of one observation, stamped with obs.time_s.
+
+    Velocity goes in TwistStamped twist.linear.x (m/s), thrust in WrenchStamped wrench.force.x (N),
+    both along the swimming axis (body x, forward +).
+    """
+    time = stamp(obs.time_s)
+    velocity = TwistStamped()
+    velocity.header.stamp = time
+    velocity.header.frame_id = frame_id
+    velocity.twist.linear.x = float(obs.velocity_m_s)
+    thrust = WrenchStamped()
+    thrust.header.stamp = time
+    thrust.header.frame_id = frame_id
+    thrust.wrench.force.x = float(obs.thrust_n)
+    return [
+        (TOPIC_MANTLE_RADIUS, _float64(obs.mantle_radius_m)),
+        (TOPIC_VOLUME, _float64(obs.volume_m3)),
+        (TOPIC_VELOCITY, velocity),
+        (TOPIC_THRUST, thrust),
+        (TOPIC_FLUID_MASS, _float64(obs.fluid_mass_kg)),
+        (TOPIC_CLOCK, Clock(clock=time)),
+    ]
+
+
+def ledger_message(ledger: Mapping[str, float], time_s: float, frame_id: str = FRAME_ID) -> DiagnosticArray:
+    """Energy ledger (J) -> DiagnosticArray with one status `pulsejet energy ledger`.
+
+    One KeyValue per key, value = repr(float) so it parses back to the exact float. Level OK, or
+    WARN when |closure_relative| > 5 % (or is not finite): the books do not balance.
+    """
+    closure = float(ledger.get('closure_relative', 0.0))
+    status = DiagnosticStatus()
+    status.name = LEDGER_STATUS_NAME
+    status.hardware_id = LEDGER_HARDWARE_ID
+    if math.isfinite(closure) and abs(closure) <= LEDGER_WARN_RELATIVE:
+        status.level = DiagnosticStatus.OK
+        status.message = f'energy closure {closure:+.2%} (within {LEDGER_WARN_RELATIVE:.0%})'
+    else:
+        status.level = DiagnosticStatus.WARN
+        status.message = f'energy closure {closure:+.2%} exceeds {LEDGER_WARN_RELATIVE:.0%}'
+    status.values = [KeyValue(key=str(k), value=repr(float(v))) for k, v in ledger.items()]
+    array = DiagnosticArray()
+    array.header.stamp = stamp(time_s)
+    array.header.frame_id = frame_id
+    array.status = [status]
+    return array
+
+
+def ledger_from_message(msg: Any) -> dict[str, float]:
+    """Inverse of ledger_message (works on rclpy or decoded-from-bag messages): key -> J."""
+    out: dict[str, float] = {}
+    for status in msg.status:
+        if status.name == LEDGER_STATUS_NAME:
+            for kv in status.values:
+                out[kv.key] = float(kv.value)
+    return out
+
+
+def command_messages(cmd: Command) -> list[tuple[str, Float64]]:
+    """(topic, Float64) for each actuator command: pump flow m^3/s, valve opening 0..1, cable force N."""
+    return [
+        (TOPIC_CMD_PUMP_FLOW, _float64(cmd.pump_flow_m3_s)),
+        (TOPIC_CMD_VALVE, _float64(cmd.valve_opening)),
+        (TOPIC_CMD_CABLE_FORCE, _float64(cmd.cable_force_n)),
+    ]
+
+
+def applied_command_message(cmd: Command, time_s: float, frame_id: str = FRAME_ID) -> JointState:
+    """The command held from time_s (simulation time) on: JointState with names
+    APPLIED_COMMAND_NAMES and the values in `position` (m^3/s, 0..1, N)."""
+    msg = JointState()
+    msg.header.stamp = stamp(time_s)
+    msg.header.frame_id = frame_id
+    msg.name = list(APPLIED_COMMAND_NAMES)
+    msg.position = [float(cmd.pump_flow_m3_s), float(cmd.valve_opening), float(cmd.cable_force_n)]
+    return msg
+
+
+def command_from_applied(msg: Any) -> tuple[float, Command]:
+    """Inverse of applied_command_message (rclpy or decoded-from-bag message): (time_s, Command)."""
+    values = dict(zip(msg.name, msg.position))
+    time_s = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+    return time_s, Command(values['pump_flow_m3_s'], values['valve_opening'], values['cable_force_n'])

@@ -1,0 +1,156 @@
+"""ROS 2 node `recorder`: write subscribed topics to one MCAP file (rosbag2 layout) as they arrive.
+
+Messages are taken raw (CDR bytes, no deserialization) and logged with their receive time (system
+clock, ns), like `ros2 bag record`; analysis uses the simulation-time header stamps inside them.
+
+    ros2 run pulsejet_sim recorder --ros-args -p output:=runs/x.mcap -p topics:="['pulsejet/velocity']"
+
+Parameters: `output` (path; default runs/<UTC date-time>.mcap), `topics` (string array; default
+every pulsejet topic incl. commands, the energy ledger and /clock; an entry may be `name:pkg/msg/Type`
+for a topic outside the pulsejet set). On SIGINT/SIGTERM the file is closed complete and its path
+printed. `Recorder(node, path, topics)` does the same inside another process's node.
+"""
+from __future__ import annotations
+
+import datetime
+import importlib
+import sys
+import time
+from pathlib import Path
+from typing import Iterable, Sequence
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from pulsejet_sim import messages
+from pulsejet_sim.bag import msgdefs
+from pulsejet_sim.bag.writer import BagError, BagWriter, qos_profiles_yaml
+
+# State and command topics: reliable and deep, so a burst from a fast simulation is not dropped.
+STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                       reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+# /clock: best effort matches both best-effort and reliable publishers (a reliable subscription
+# would not match a best-effort clock publisher).
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                       reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+FLUSH_PERIOD_S = 1.0   # an idle recorder still pushes its last chunk to disk within this time
+
+
+def default_output(now: datetime.datetime | None = None) -> Path:
+    """runs/<YYYY-mm-dd_HH-MM-SS>.mcap (UTC) relative to the working directory."""
+    now = now or datetime.datetime.now(datetime.timezone.utc)
+    return Path('runs') / f'{now:%Y-%m-%d_%H-%M-%S}.mcap'
+
+
+def parse_topics(entries: Iterable[str]) -> dict[str, str]:
+    """Topic entries -> {topic: type name}. An entry is a pulsejet topic ('pulsejet/velocity',
+    '/pulsejet/velocity', '/clock') or 'name:pkg/msg/Type'. ValueError names a bad entry."""
+    out: dict[str, str] = {}
+    for entry in entries:
+        if not isinstance(entry, str) or not entry.strip():
+            raise ValueError(f'topic entry {entry!r} is empty; expected a topic name or "name:pkg/msg/Type"')
+        name, sep, type_name = entry.strip().partition(':')
+        if sep:
+            msgdefs.split_type_name(type_name)
+        else:
+            type_name = messages.TOPIC_TYPES.get(name) or messages.TOPIC_TYPES.get(name.lstrip('/'), '')
+            if not type_name:
+                raise ValueError(f'topic {name!r} is not a pulsejet topic and has no type; allowed: '
+                                 f'{sorted(messages.TOPIC_TYPES)} or "name:pkg/msg/Type"')
+        out[name] = type_name
+    return out
+
+
+def import_message_class(type_name: str) -> type:
+    """'pkg/msg/Type' -> the generated rclpy class; ValueError names a type that is not installed."""
+    package, namespace, name = msgdefs.split_type_name(type_name)
+    try:
+        return getattr(importlib.import_module(f'{package}.{namespace}'), name)
+    except (ImportError, AttributeError):
+        raise ValueError(f'message type {type_name!r} is not installed '
+                         f'(no class {name} in Python module {package}.{namespace})') from None
+
+
+class Recorder:
+    """Subscribe raw to `topics` on `node` and write every message to `path` until close().
+
+    topics: entries as for parse_topics; None = every topic in messages.TOPIC_TYPES. Topic names
+    are resolved in the node's namespace and recorded fully qualified. A topic appears in the file
+    with its first message, carrying the QoS its publishers offered (as rosbag2 does).
+    """
+
+    def __init__(self, node: Node, path: str | Path, topics: Sequence[str] | None = None) -> None:
+        self.node = node
+        wanted = parse_topics(topics if topics is not None else list(messages.TOPIC_TYPES))
+        self.writer = BagWriter(path, flush_period_s=FLUSH_PERIOD_S)
+        self.path = self.writer.path
+        self._subscriptions = []
+        for name, type_name in wanted.items():
+            resolved = node.resolve_topic_name(name)
+            qos = CLOCK_QOS if resolved == '/clock' else STATE_QOS
+            callback = self._make_callback(resolved, type_name)
+            self._subscriptions.append(
+                node.create_subscription(import_message_class(type_name), name, callback, qos, raw=True))
+        self._timer = node.create_timer(FLUSH_PERIOD_S, self.writer.flush_if_due)
+
+    def _make_callback(self, topic: str, type_name: str):
+        def on_message(data: bytes) -> None:
+            receive_ns = time.time_ns()
+            try:
+                if topic not in self.writer.topics:
+                    infos = self.node.get_publishers_info_by_topic(topic)
+                    self.writer.add_topic(topic, type_name, qos_profiles_yaml(i.qos_profile for i in infos))
+                self.writer.write(topic, data, receive_ns)
+            except BagError:
+                if not self.writer.closed:
+                    raise
+                # else: delivered by an executor thread while close() ran; recording has ended
+        return on_message
+
+    @property
+    def message_counts(self) -> dict[str, int]:
+        return self.writer.message_counts
+
+    def close(self) -> Path:
+        """Stop recording and close the file (idempotent); returns its path."""
+        for sub in self._subscriptions:
+            self.node.destroy_subscription(sub)
+        self._subscriptions.clear()
+        if self._timer is not None:
+            self.node.destroy_timer(self._timer)
+            self._timer = None
+        self.writer.close()
+        return self.path
+
+
+def main(args: list[str] | None = None) -> int:
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that make spin() return
+    node = Node('recorder')
+    output = node.declare_parameter('output', '').value or str(default_output())
+    topics = list(node.declare_parameter('topics', list(messages.TOPIC_TYPES)).value or messages.TOPIC_TYPES)
+    try:
+        recorder = Recorder(node, output, topics)
+    except (ValueError, OSError) as exc:
+        print(f'recorder: error: {exc}', file=sys.stderr)
+        node.destroy_node()
+        rclpy.try_shutdown()
+        return 2
+    print(f'recorder: writing {recorder.path} ({len(topics)} topics)', flush=True)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        path = recorder.close()
+        counts = recorder.message_counts
+        node.destroy_node()
+        rclpy.try_shutdown()
+        print(f'recorder: wrote {sum(counts.values())} messages to {path}', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,97 @@
+"""summarize / plot / CLI entry points on a real MCAP with known signals."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from rclpy.serialization import serialize_message
+
+from pulsejet_sim import analysis, messages
+from pulsejet_sim.bag.writer import BagWriter
+from pulsejet_sim.models.base import Command, Observation
+
+DT_S = 0.01
+DURATION_S = 2.0
+SPEED_M_S = 0.5          # constant -> distance 1.0 m over 2 s
+THRUST_N = 2.0           # for the first 1 s, then 0 -> impulse 2.0 N s (+ half a step of ramp)
+
+
+def observation(t: float) -> Observation:
+    return Observation(time_s=t, position_m=SPEED_M_S * t, velocity_m_s=SPEED_M_S, acceleration_m_s2=0.0,
+                       mantle_radius_m=0.05 + 0.01 * t, volume_m3=1e-4 * (1.0 + t), fluid_mass_kg=0.1 + 0.05 * t,
+                       thrust_n=THRUST_N if t <= 1.0 + 1e-9 else 0.0, added_mass_force_n=0.0, drag_n=0.0,
+                       jet_speed_m_s=0.0, cavity_pressure_pa=0.0, pump_flow_m3_s=0.0, valve_opening=1.0)
+
+
+@pytest.fixture(scope='module')
+def run_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp('analysis') / 'run.mcap'
+    n = round(DURATION_S / DT_S)
+    with BagWriter(path) as bag:
+        for i in range(n + 1):
+            t = i * DT_S
+            log_ns = messages.stamp_ns(t)
+            for topic, msg in messages.observation_messages(observation(t)) + messages.command_messages(Command()):
+                bag.write_message(topic, msg, log_ns)
+            if i % 50 == 0:
+                ledger = {'stored_elastic': 0.1 * t, 'in_pump_work': 0.2 * t, 'closure_error': 0.0,
+                          'closure_relative': 0.0 if t < 1.5 else 0.08}
+                bag.write_message('pulsejet/energy_ledger', messages.ledger_message(ledger, t), log_ns)
+    return path
+
+
+def test_summary_numbers(run_file: Path) -> None:
+    s = analysis.summarize(run_file)
+    assert s['duration_s'] == pytest.approx(DURATION_S)
+    assert s['distance_m'] == pytest.approx(SPEED_M_S * DURATION_S, abs=1e-9)
+    assert s['peak_speed_m_s'] == pytest.approx(SPEED_M_S)
+    assert s['mean_speed_m_s'] == pytest.approx(SPEED_M_S)
+    assert s['thrust_impulse_n_s'] == pytest.approx(THRUST_N * 1.0, abs=THRUST_N * DT_S)
+    assert s['fluid_mass_min_kg'] == pytest.approx(0.1) and s['fluid_mass_max_kg'] == pytest.approx(0.2)
+    n = round(DURATION_S / DT_S) + 1
+    assert s['message_counts']['/pulsejet/velocity'] == n and s['message_counts']['/clock'] == n
+    assert s['message_counts']['/pulsejet/energy_ledger'] == 5
+    assert s['energy_ledger_j'] == {'stored_elastic': pytest.approx(0.2), 'in_pump_work': pytest.approx(0.4),
+                                    'closure_error': 0.0, 'closure_relative': 0.08}
+    assert s['energy_ledger_level'] == 'WARN'
+    assert not s['truncated']
+
+
+def test_format_summary_has_units(run_file: Path) -> None:
+    text = analysis.format_summary(analysis.summarize(run_file))
+    for fragment in ('distance travelled', '1 m', 'thrust impulse', 'N s', 'peak speed', '0.5 m/s',
+                     'fluid mass max', 'kg', '/pulsejet/velocity', 'final energy ledger (WARN)', 'stored_elastic'):
+        assert fragment in text
+
+
+def test_plot_writes_png_next_to_file(run_file: Path, tmp_path: Path) -> None:
+    png = analysis.plot(run_file)
+    assert png == run_file.with_suffix('.png')
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 10_000
+    out = tmp_path / 'sub' / 'x.png'
+    assert analysis.main_plot([str(run_file), '--out', str(out)]) == 0
+    assert out.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_main_summary_ok(run_file: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert analysis.main_summary([str(run_file)]) == 0
+    assert 'thrust impulse' in capsys.readouterr().out
+
+
+@pytest.mark.parametrize('kind', ['missing', 'not_mcap', 'no_pulsejet_topics', 'directory'])
+@pytest.mark.parametrize('entry', ['summary', 'plot'])
+def test_bad_input_one_line_error_exit_2(kind: str, entry: str, tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / 'bad.mcap'
+    if kind == 'not_mcap':
+        path.write_text('this is not an mcap file\n')
+    elif kind == 'no_pulsejet_topics':
+        with BagWriter(path) as bag:
+            bag.write_message('other/topic', messages.message_class('pulsejet/volume')(data=1.0), 0)
+    elif kind == 'directory':
+        path.mkdir()
+    main = analysis.main_summary if entry == 'summary' else analysis.main_plot
+    assert main([str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'Traceback' not in err
+    assert str(path) in err and 'expected' in err

@@ -1,0 +1,91 @@
+"""The offline command: same core and routine as the nodes, no DDS, same topics in MCAP."""
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+from pulsejet_sim.runner import run_scene
+from pulsejet_sim.scene import load_scene
+
+REPO = Path(__file__).resolve().parent.parent
+PULSEJET = [sys.executable, '-m', 'pulsejet_sim.cli']
+
+
+def read_all(path):
+    with AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        out = {}
+        for conn, _, raw in reader.messages():
+            out.setdefault(conn.topic, []).append(reader.deserialize(raw, conn.msgtype))
+        types = {c.topic: c.msgtype for c in reader.connections}
+    return out, types
+
+
+@pytest.mark.timeout(120)
+def test_pulsejet_run_writes_the_live_topics_and_summary_and_plot_work(tmp_path):
+    out = tmp_path / 'cycle.mcap'
+    proc = subprocess.run(PULSEJET + ['run', 'pump_cycle', '--duration', '6', '--out', str(out)],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=110)
+    assert proc.returncode == 0, proc.stderr
+    assert 'peak speed' in proc.stdout and 'closure_error' in proc.stdout
+    msgs, types = read_all(out)
+    assert types['/pulsejet/velocity'] == 'geometry_msgs/msg/TwistStamped'
+    assert types['/pulsejet/thrust'] == 'geometry_msgs/msg/WrenchStamped'
+    assert types['/pulsejet/volume'] == 'std_msgs/msg/Float64'
+    assert types['/clock'] == 'rosgraph_msgs/msg/Clock'
+    velocity = np.array([m.twist.linear.x for m in msgs['/pulsejet/velocity']])
+    volume = np.array([m.data for m in msgs['/pulsejet/volume']])
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in msgs['/pulsejet/velocity']])
+    assert len(velocity) == 601 and stamps[-1] == pytest.approx(6.0)
+    assert np.all(np.diff(stamps) > 0)
+    assert np.all(np.isfinite(velocity)) and np.all(np.isfinite(volume))
+    assert velocity.max() > 0.1 and volume.max() > 2.5 * volume.min()    # it pumped, jetted and swam
+    pump = [m.data for m in msgs['/pulsejet/cmd/pump_flow']]
+    assert max(pump) == pytest.approx(2.5e-3) and min(pump) == 0.0
+    summary = subprocess.run(PULSEJET + ['summary', str(out)], capture_output=True, text=True, timeout=60)
+    assert summary.returncode == 0 and 'thrust impulse' in summary.stdout
+    png = tmp_path / 'cycle-plot.png'
+    plot = subprocess.run(PULSEJET + ['plot', str(out), '--out', str(png)], capture_output=True, text=True, timeout=60)
+    assert plot.returncode == 0, plot.stderr
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_pulsejet_run_refuses_a_bad_scene_with_a_clear_message(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text((REPO / 'config' / 'escape.yaml').read_text().replace('stiffness_n_m: 2094', 'stiffness_n_m: -1'))
+    proc = subprocess.run(PULSEJET + ['run', str(bad), '--duration', '1', '--out', str(tmp_path / 'x.mcap')],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert 'material.stiffness_n_m' in proc.stderr and '-1' in proc.stderr and 'allowed' in proc.stderr
+    assert 'Traceback' not in proc.stderr
+    proc = subprocess.run(PULSEJET + ['run', 'nonexistent_scene'], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and 'pump_cycle' in proc.stderr
+
+
+def test_offline_run_is_deterministic_and_matches_direct_stepping(tmp_path):
+    scene = load_scene('escape')
+    a = run_scene(scene, 1.0, tmp_path / 'a.mcap')
+    b = run_scene(load_scene('escape'), 1.0, tmp_path / 'b.mcap')
+    assert np.array_equal(a.sim.state, b.sim.state)
+    msgs_a, _ = read_all(tmp_path / 'a.mcap')
+    msgs_b, _ = read_all(tmp_path / 'b.mcap')
+    va = [m.twist.linear.x for m in msgs_a['/pulsejet/velocity']]
+    vb = [m.twist.linear.x for m in msgs_b['/pulsejet/velocity']]
+    assert va == vb and len(va) == 101
+    ledger = msgs_a['/pulsejet/energy_ledger'][-1].status[0]
+    values = {kv.key: float(kv.value) for kv in ledger.values}
+    assert math.isclose(values['in_initial'], 0.5 * 2094 * (0.1368 - 0.036) ** 2, rel_tol=1e-9)
+
+
+def test_a_blow_up_ends_the_run_with_the_fault_and_no_nan(tmp_path):
+    scene = load_scene('pump_cycle', {'material': {'stiffness_n_m': 1e-3},
+                                      'routine': {'pump_flow_m3_s': 0.05, 'target_volume_m3': 0.0, 'inflate_s': 100.0}})
+    result = run_scene(scene, 5.0, tmp_path / 'boom.mcap')
+    assert result.fault and 'major semi-axis' in result.fault
+    msgs, _ = read_all(tmp_path / 'boom.mcap')
+    radius = np.array([m.data for m in msgs['/pulsejet/mantle_radius']])
+    assert np.all(np.isfinite(radius)) and len(radius) < 501
