@@ -164,6 +164,9 @@ def applied_command_message(cmd: Command, time_s: float, frame_id: str = FRAME_I
     msg.header.frame_id = frame_id
     msg.name = list(APPLIED_COMMAND_NAMES)
     msg.position = [float(cmd.pump_flow_m3_s), float(cmd.valve_opening), float(cmd.cable_force_n)]
+    # Filled, not empty: rosbags (0.11) misreads the padding rclpy writes for empty trailing float64 sequences.
+    msg.velocity = [0.0] * len(APPLIED_COMMAND_NAMES)
+    msg.effort = [0.0] * len(APPLIED_COMMAND_NAMES)
     return msg
 
 
