@@ -50,7 +50,7 @@ class Simulation:
         return self.model.observe(self.state, self.time_s, self.command)
 
     def energy_ledger(self) -> dict[str, float]:
-        return self.model.energy_ledger(self.state, self.initial_state)
+        return self.model.energy_ledger(self.state)
 
     def profile(self):
         return self.model.profile(self.state)
