@@ -58,6 +58,8 @@ class Publisher:
             obs = observation(i)
             batch = messages.observation_messages(obs) + messages.command_messages(Command(1e-3, 0.25 * (i % 4), 0.0))
             batch.append((messages.TOPIC_ENERGY_LEDGER, messages.ledger_message({'in_pump_work': 0.5 * i}, obs.time_s)))
+            batch.append((messages.TOPIC_APPLIED_COMMAND,
+                          messages.applied_command_message(Command(1e-3, 0.25 * (i % 4), 0.0), obs.time_s)))
             for topic, msg in batch:
                 if topic in self.pubs:
                     self.pubs[topic].publish(msg)

@@ -1,0 +1,228 @@
+"""End to end: sim_node + controller_node processes, every topic recorded to MCAP, read back with rosbags.
+
+Runs in a ROS domain derived from the pytest pid with localhost-only discovery; a short simulated
+duration at real_time_factor > 1 keeps it well under a minute.
+"""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from rosbags.highlevel import AnyReader  # noqa: E402
+
+DOMAIN_OFFSET = 37
+DURATION_S = 6.0          # pump_cycle: inflate 2 s, hold 0.2 s, jet 1.8 s -> 1.5 cycles
+REAL_TIME_FACTOR = 3.0
+
+
+def ros_float(x: float) -> str:
+    s = repr(float(x))
+    return format(float(x), '.12f') if ('e' in s or 'n' in s) else s
+
+
+@pytest.fixture
+def ros_domain(monkeypatch):
+    domain = 1 + (os.getpid() + DOMAIN_OFFSET) % 100
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
+    monkeypatch.setenv('RCUTILS_COLORIZED_OUTPUT', '0')
+    monkeypatch.setenv('PYTHONUNBUFFERED', '1')
+    return domain
+
+
+def start(module: str, params: dict, log: Path) -> tuple[subprocess.Popen, object]:
+    args = [sys.executable, '-m', module, '--ros-args']
+    for k, v in params.items():
+        args += ['-p', f'{k}:={ros_float(v) if isinstance(v, float) else v}']
+    f = open(log, 'wb')
+    return subprocess.Popen(args, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                            env=dict(os.environ)), f
+
+
+def stop(proc: subprocess.Popen, timeout=10.0) -> int:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
+
+
+def read_bag(path: Path) -> dict[str, list[tuple[float, object]]]:
+    """topic -> [(header/clock stamp in s or None, message)] read with rosbags."""
+    out: dict[str, list] = {}
+    with AnyReader([path]) as reader:
+        for conn, _, raw in reader.messages(connections=reader.connections):
+            msg = reader.deserialize(raw, conn.msgtype)
+            if hasattr(msg, 'header'):
+                t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+            elif hasattr(msg, 'clock'):
+                t = msg.clock.sec + msg.clock.nanosec * 1e-9
+            else:
+                t = None
+            out.setdefault(conn.topic, []).append((t, msg))
+    return out
+
+
+def values_of(entries) -> list[float]:
+    return [m.data for _, m in entries]
+
+
+@pytest.mark.timeout(150)
+def test_sim_and_controller_swim_recorded_to_mcap(ros_domain, tmp_path):
+    from rclpy.executors import SingleThreadedExecutor
+
+    from pulsejet_sim.recorder import Recorder
+
+    mcap = tmp_path / 'run.mcap'
+    procs, files = {}, []
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=ros_domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node('integration_recorder', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    recorder = Recorder(node, mcap, None)
+    t_start = time.monotonic()
+    try:
+        procs['controller'], f = start('pulsejet_ctrl.controller_node', {'scene': 'pump_cycle'},
+                                       tmp_path / 'controller.log')
+        files.append(f)
+        procs['sim'], f = start('pulsejet_sim.sim_node', {
+            'scene': 'pump_cycle', 'duration_s': DURATION_S, 'real_time_factor': REAL_TIME_FACTOR,
+            'wait_for_subscribers': 2, 'wait_timeout_s': 30.0}, tmp_path / 'sim.log')
+        files.append(f)
+        deadline = time.monotonic() + 100
+        while procs['sim'].poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+            assert procs['controller'].poll() is None, (tmp_path / 'controller.log').read_text()
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        codes = {name: stop(p) for name, p in procs.items()}
+        for f in files:
+            f.close()
+        recorder.close()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    wall = time.monotonic() - t_start
+    sim_log = (tmp_path / 'sim.log').read_text()
+    assert codes['sim'] == 0, f'sim_node exit {codes["sim"]}:\n{sim_log[-3000:]}'
+    assert codes['controller'] == 0, (tmp_path / 'controller.log').read_text()[-3000:]
+    assert 'ERROR' not in sim_log, sim_log[-3000:]
+    print(f'wall time {wall:.1f} s for {DURATION_S} s simulated at rtf {REAL_TIME_FACTOR}')
+
+    bag = read_bag(mcap)
+    for topic in ('/clock', '/pulsejet/volume', '/pulsejet/velocity', '/pulsejet/thrust', '/pulsejet/mantle_radius',
+                  '/pulsejet/fluid_mass', '/pulsejet/energy_ledger', '/pulsejet/cmd/pump_flow',
+                  '/pulsejet/cmd/valve', '/pulsejet/cmd/cable_force', '/pulsejet/applied_command'):
+        assert bag.get(topic), f'{topic} not recorded; have {sorted(bag)}'
+
+    # nothing is NaN
+    for topic in ('/pulsejet/volume', '/pulsejet/mantle_radius', '/pulsejet/fluid_mass', '/pulsejet/cmd/pump_flow',
+                  '/pulsejet/cmd/valve', '/pulsejet/cmd/cable_force'):
+        assert all(math.isfinite(v) for v in values_of(bag[topic])), topic
+    velocity = np.array([(t, m.twist.linear.x) for t, m in bag['/pulsejet/velocity']])
+    thrust = np.array([(t, m.wrench.force.x) for t, m in bag['/pulsejet/thrust']])
+    assert np.isfinite(velocity).all() and np.isfinite(thrust).all()
+    for _, m in bag['/pulsejet/energy_ledger']:
+        assert all(math.isfinite(float(kv.value)) for kv in m.status[0].values)
+
+    # simulation time: stamps from 0 to the duration, the clock reached the duration
+    clock = np.array([t for t, _ in bag['/clock']])
+    assert clock.min() >= 0 and abs(clock.max() - DURATION_S) < 1e-6, (clock.min(), clock.max())
+    assert np.all(np.diff(clock) >= 0)
+    assert velocity[:, 0].max() <= DURATION_S + 1e-9
+
+    # the controller cycled the pump and the valve
+    pump = values_of(bag['/pulsejet/cmd/pump_flow'])
+    valve = values_of(bag['/pulsejet/cmd/valve'])
+    assert max(pump) > 0 and min(pump) == 0.0
+    assert max(valve) > 0.5 and min(valve) == 0.0
+
+    # the volume rose and fell at least once
+    vol = np.array(values_of(bag['/pulsejet/volume']), dtype=float)   # in publication order
+    v0, v_max = vol[0], vol.max()
+    assert v_max > 1.5 * v0, f'volume did not rise: start {v0:.3e}, max {v_max:.3e} m^3'
+    high, low = v0 + 0.75 * (v_max - v0), v0 + 0.25 * (v_max - v0)
+    i_high = int(np.argmax(vol > high))
+    assert vol[i_high:].min() < low, \
+        f'volume did not fall after rising: max {v_max:.3e}, min after {vol[i_high:].min():.3e} m^3'
+
+    # the applied commands replay the run offline step for step (same kernels, same batches' commands)
+    applied = bag.get('/pulsejet/applied_command')
+    assert applied, 'no /pulsejet/applied_command recorded'
+    from pulsejet_sim.messages import command_from_applied
+    from pulsejet_sim.scene import load_scene
+    from pulsejet_sim.simulation import Simulation
+    changes = sorted((command_from_applied(m) for _, m in applied), key=lambda tc: tc[0])   # stable
+    replay = Simulation(load_scene('pump_cycle').model)
+    dt = replay.model.dt_s
+    for i, (t_i, cmd) in enumerate(changes):
+        t_next = changes[i + 1][0] if i + 1 < len(changes) else DURATION_S
+        n = int(round(t_next / dt)) - replay.steps
+        assert n >= 0
+        replay.step(n, cmd)
+    final = replay.observe()
+    assert abs(final.time_s - DURATION_S) < 1e-9
+    recorded_u = velocity[np.argmax(velocity[:, 0]), 1]
+    recorded_v = vol[-1]
+    assert final.velocity_m_s == pytest.approx(recorded_u, rel=1e-9, abs=1e-12)
+    assert final.volume_m3 == pytest.approx(recorded_v, rel=1e-9, abs=1e-15)
+
+    # the vehicle swam forward
+    order = np.argsort(velocity[:, 0])
+    t, u = velocity[order, 0], velocity[order, 1]
+    distance = float(np.sum(0.5 * (u[1:] + u[:-1]) * np.diff(t)))
+    assert distance > 0.05, f'distance {distance:.4f} m'
+    assert u.max() > 0.05
+
+
+@pytest.mark.timeout(150)
+def test_demo_end_to_end(ros_domain, tmp_path):
+    """`python -m pulsejet_sim.demo`: processes, recording, summary and plot, exit 0."""
+    out = tmp_path / 'demo.mcap'
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(1 + (os.getpid() + DOMAIN_OFFSET + 1) % 100)
+    proc = subprocess.Popen([sys.executable, '-m', 'pulsejet_sim.demo', '--duration', '3', '--real-time-factor', '3',
+                             '--out', str(out)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, cwd=tmp_path, start_new_session=True)
+    try:
+        text, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGINT)
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+    assert proc.returncode == 0, text[-4000:]
+    assert out.is_file() and out.stat().st_size > 0
+    png = out.with_suffix('.png')
+    assert png.is_file(), text[-2000:]
+    assert f'recording: {out}' in text and f'plot:      {png}' in text, text[-2000:]
+    assert 'distance' in text, text[-2000:]
+
+
+@pytest.mark.timeout(60)
+def test_demo_reports_a_failing_child(ros_domain, tmp_path):
+    """A sim_node that cannot start (unknown scene) makes the demo exit non-zero with the reason."""
+    out = tmp_path / 'bad.mcap'
+    proc = subprocess.run([sys.executable, '-m', 'pulsejet_sim.demo', '--duration', '1', '--scene', 'no_such_scene',
+                           '--out', str(out)], env=dict(os.environ), capture_output=True, text=True, cwd=tmp_path,
+                          timeout=50)
+    assert proc.returncode != 0
+    assert 'demo failed' in proc.stderr and 'no_such_scene' in proc.stderr, proc.stderr[-3000:]

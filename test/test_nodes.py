@@ -1,0 +1,388 @@
+"""The real sim_node (a subprocess) against an in-process probe node over DDS.
+
+Every test runs in a ROS domain derived from the pytest pid, with localhost-only discovery.
+"""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import TwistStamped, WrenchStamped  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from std_msgs.msg import Float64  # noqa: E402
+
+DOMAIN_OFFSET = 0
+QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def stamp_s(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def ros_float(x: float) -> str:
+    s = repr(float(x))
+    return format(float(x), '.12f') if ('e' in s or 'n' in s) else s
+
+
+@pytest.fixture
+def ros_domain(monkeypatch):
+    domain = 1 + (os.getpid() + DOMAIN_OFFSET) % 100
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
+    monkeypatch.setenv('RCUTILS_COLORIZED_OUTPUT', '0')
+    monkeypatch.setenv('PYTHONUNBUFFERED', '1')
+    return domain
+
+
+class NodeProcess:
+    """A node started as `python -m module --ros-args -p ...`, output in a file."""
+
+    def __init__(self, module: str, params: dict, log_path: Path):
+        self.log_path = log_path
+        args = [sys.executable, '-m', module, '--ros-args']
+        for k, v in params.items():
+            args += ['-p', f'{k}:={ros_float(v) if isinstance(v, float) else v}']
+        self._log = open(log_path, 'wb')
+        self.proc = subprocess.Popen(args, stdout=self._log, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, env=dict(os.environ))
+
+    def output(self) -> str:
+        return self.log_path.read_text(errors='replace')
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self, sig=signal.SIGINT, timeout=10.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
+        return self.proc.returncode
+
+
+@pytest.fixture
+def start_node(ros_domain, tmp_path):
+    started = []
+
+    def start(module='pulsejet_sim.sim_node', **params):
+        p = NodeProcess(module, params, tmp_path / f'{module}.{len(started)}.log')
+        started.append(p)
+        return p
+    yield start
+    for p in started:
+        p.stop(timeout=5.0)
+
+
+class Probe:
+    """In-process node: subscribes to the simulator's topics and publishes commands."""
+
+    def __init__(self, domain: int):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain,
+                   signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        self.node = rclpy.create_node('probe', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.received = {}
+        topics = {'/clock': Clock, 'pulsejet/volume': Float64, 'pulsejet/mantle_radius': Float64,
+                  'pulsejet/fluid_mass': Float64, 'pulsejet/velocity': TwistStamped,
+                  'pulsejet/thrust': WrenchStamped, 'pulsejet/energy_ledger': DiagnosticArray}
+        for topic, msg_type in topics.items():
+            self.received[topic] = []
+            self.node.create_subscription(msg_type, topic, self._store(topic), QOS)
+        self.pub = {name: self.node.create_publisher(Float64, f'pulsejet/cmd/{name}', QOS)
+                    for name in ('pump_flow', 'valve', 'cable_force')}
+
+    def _store(self, topic):
+        def cb(msg):
+            self.received[topic].append((time.monotonic(), msg))
+        return cb
+
+    def spin_for(self, seconds: float):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def spin_until(self, predicate, timeout: float, what: str = 'condition'):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return
+            self.executor.spin_once(timeout_sec=0.02)
+        raise AssertionError(f'timed out after {timeout:g} s waiting for {what}')
+
+    def clock_s(self) -> float:
+        msgs = self.received['/clock']
+        return stamp_s(msgs[-1][1].clock) if msgs else -1.0
+
+    def last(self, topic):
+        return self.received[topic][-1][1] if self.received[topic] else None
+
+    def send(self, name: str, value: float):
+        self.pub[name].publish(Float64(data=float(value)))
+
+    def wait_for_subscribers(self, timeout=20.0):
+        self.spin_until(lambda: all(p.get_subscription_count() > 0 for p in self.pub.values()),
+                        timeout, 'sim_node to subscribe to the command topics')
+
+    def close(self):
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def probe(ros_domain):
+    p = Probe(ros_domain)
+    yield p
+    p.close()
+
+
+def wait_running(probe, sim, t_min=0.2, timeout=60.0):
+    """Until /clock passed t_min (scene loading + JIT may take a while on a cold cache)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        probe.spin_for(0.1)
+        assert sim.alive(), f'sim_node died:\n{sim.output()[-3000:]}'
+        if probe.clock_s() >= t_min:
+            return
+    raise AssertionError(f'/clock did not reach {t_min} s in {timeout} s:\n{sim.output()[-3000:]}')
+
+
+@pytest.mark.timeout(120)
+def test_publishes_every_topic_stamped_with_sim_time(start_node, probe):
+    sim = start_node(real_time_factor=1.0, publish_rate_hz=50.0)
+    wait_running(probe, sim, 0.2)
+    wall0, sim0 = time.monotonic(), probe.clock_s()
+    probe.spin_for(1.5)
+    wall1, sim1 = time.monotonic(), probe.clock_s()
+    assert sim.alive(), sim.output()[-3000:]
+
+    # /clock advances at about the real-time factor and never goes back
+    clocks = [stamp_s(m.clock) for _, m in probe.received['/clock']]
+    assert all(b >= a for a, b in zip(clocks, clocks[1:])), 'clock went backwards'
+    rate = (sim1 - sim0) / (wall1 - wall0)
+    assert 0.6 < rate < 1.4, f'sim time advanced {sim1 - sim0:.3f} s in {wall1 - wall0:.3f} s of wall time'
+
+    for topic, msgs in probe.received.items():
+        assert msgs, f'nothing received on {topic}'
+    for topic in ('pulsejet/volume', 'pulsejet/mantle_radius', 'pulsejet/fluid_mass'):
+        values = [m.data for _, m in probe.received[topic]]
+        assert all(math.isfinite(v) for v in values), topic
+        assert all(v > 0 for v in values), f'{topic} not positive: {values[:5]}'
+
+    # headers carry simulation time: each stamp is one of the /clock instants, not wall time
+    clock_set = {round(c, 9) for c in clocks}
+    for topic in ('pulsejet/velocity', 'pulsejet/thrust'):
+        stamps = [stamp_s(m.header.stamp) for _, m in probe.received[topic]]
+        assert max(stamps) < 1e6, f'{topic} stamped with wall time: {stamps[-1]}'
+        assert all(round(s, 9) in clock_set for s in stamps[1:-1]), \
+            f'{topic} stamps not on the /clock instants: {stamps[:5]} vs {clocks[:5]}'
+        assert probe.last(topic).header.frame_id == 'pulsejet/body'
+    ledger = probe.last('pulsejet/energy_ledger')
+    assert stamp_s(ledger.header.stamp) < 1e6
+    keys = {kv.key for kv in ledger.status[0].values}
+    assert {'in_pump_work', 'out_jet_kinetic', 'closure_error'} <= keys, keys
+    n_ledger = len(probe.received['pulsejet/energy_ledger'])
+    n_clock = len(probe.received['/clock'])
+    assert n_ledger < n_clock / 3, f'ledger published {n_ledger} times vs {n_clock} clock messages (~5 Hz expected)'
+
+
+def volume_series(probe, since_wall):
+    return [m.data for t, m in probe.received['pulsejet/volume'] if t >= since_wall]
+
+
+@pytest.mark.timeout(120)
+def test_bad_commands_rejected_good_ones_applied(start_node, probe):
+    from pulsejet_sim.models.base import Command
+    sim = start_node(real_time_factor=1.0, publish_rate_hz=50.0)
+    probe.wait_for_subscribers()
+    wait_running(probe, sim, 0.3)
+    # idle (pump off, valve open): the cavity volume is at rest
+    probe.spin_for(0.5)
+    rest = volume_series(probe, time.monotonic() - 0.4)
+    v_rest = rest[-1]
+
+    bad = [('pump_flow', float('nan'), 'nan'), ('pump_flow', float('inf'), 'inf'), ('pump_flow', -1.0, '-1.0'),
+           ('valve', 2.0, '2.0'), ('valve', float('nan'), 'nan'), ('cable_force', -5.0, '-5.0')]
+    t_bad = time.monotonic()
+    for name, value, _ in bad:
+        probe.send(name, value)
+        probe.spin_for(0.1)
+    probe.spin_for(1.0)
+    assert sim.alive(), f'sim_node died on a bad command:\n{sim.output()[-3000:]}'
+    out = sim.output()
+    for name, _, text in bad:
+        field = {'pump_flow': 'pump_flow_m3_s', 'valve': 'valve_opening', 'cable_force': 'cable_force_n'}[name]
+        low, high = Command.LIMITS[field]
+        expected = f'{field}={text}'
+        assert any(expected in line and f'[{low}, {high}]' in line and 'WARN' in line
+                   for line in out.splitlines()), f'no warning naming {expected} and [{low}, {high}]:\n{out[-3000:]}'
+    after = volume_series(probe, t_bad)
+    assert after and all(math.isfinite(v) for v in after), 'non-finite volume after bad commands'
+    assert max(abs(v - v_rest) for v in after) <= 0.01 * abs(v_rest) + 1e-12, \
+        f'state changed after rejected commands: rest {v_rest}, after {min(after)}..{max(after)}'
+    assert probe.clock_s() > 0.5
+
+    # a valid command takes effect: valve shut + pump on inflates the cavity
+    low, high = Command.LIMITS['pump_flow_m3_s']
+    flow = min(high, max(1e-4, abs(v_rest) * 0.5))   # about half the rest volume per second
+    probe.send('valve', 0.0)
+    probe.send('pump_flow', flow)
+    t_good = time.monotonic()
+    probe.spin_until(lambda: volume_series(probe, t_good) and max(volume_series(probe, t_good)) > v_rest * 1.05,
+                     timeout=10.0, what=f'the volume to rise above {v_rest * 1.05:.3e} m^3 with pump {flow:.3e} m^3/s')
+    assert sim.alive()
+    assert 'WARN' not in sim.output()[len(out):], sim.output()[len(out):]
+
+
+@pytest.mark.timeout(120)
+def test_exits_after_duration(start_node):
+    sim = start_node(duration_s=0.5, real_time_factor=2)   # an integer is accepted for a number
+    sim.proc.wait(timeout=90)
+    out = sim.output()
+    assert sim.proc.returncode == 0, out[-3000:]
+    assert 'duration 0.5 s of simulated time reached' in out, out[-3000:]
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_clean_shutdown_on_signal(start_node, probe, sig):
+    sim = start_node()
+    wait_running(probe, sim, 0.1)
+    t = time.monotonic()
+    code = sim.stop(sig, timeout=10.0)
+    assert code == 0, f'exit code {code} on {sig.name}:\n{sim.output()[-3000:]}'
+    assert time.monotonic() - t < 5.0
+    assert 'Traceback' not in sim.output(), sim.output()[-3000:]
+
+
+@pytest.mark.timeout(60)
+def test_rejects_invalid_parameter(start_node):
+    sim = start_node(real_time_factor=-1.0)
+    sim.proc.wait(timeout=50)
+    assert sim.proc.returncode != 0
+    assert 'real_time_factor' in sim.output(), sim.output()[-3000:]
+
+
+@pytest.mark.timeout(120)
+def test_blow_up_stops_stepping_without_nan(start_node, probe):
+    """Pumping at full flow against a shut valve over-inflates the shell until the model stops:
+    the node logs the cause, stops stepping and publishing, never publishes NaN and stays up."""
+    from pulsejet_sim.models.base import Command
+    sim = start_node(real_time_factor=2.0, publish_rate_hz=50.0)
+    probe.wait_for_subscribers()
+    wait_running(probe, sim, 0.1)
+    probe.send('valve', 0.0)
+    probe.send('pump_flow', Command.LIMITS['pump_flow_m3_s'][1])
+    probe.spin_until(lambda: 'physics blew up' in sim.output() or not sim.alive(), timeout=30.0,
+                     what='the physics to blow up')
+    probe.spin_for(0.5)
+    t_stop = probe.clock_s()
+    n_clock = len(probe.received['/clock'])
+    probe.spin_for(1.0)
+    assert sim.alive(), f'sim_node died on a blow-up:\n{sim.output()[-3000:]}'
+    out = sim.output()
+    line = next(l for l in out.splitlines() if 'physics blew up' in l)
+    assert 'ERROR' in line and 'semi-axis' in line, line
+    assert len(probe.received['/clock']) == n_clock and probe.clock_s() == t_stop, 'still publishing after a blow-up'
+    for topic in ('pulsejet/volume', 'pulsejet/mantle_radius', 'pulsejet/fluid_mass'):
+        assert all(math.isfinite(m.data) for _, m in probe.received[topic]), topic
+    assert all(math.isfinite(m.twist.linear.x) for _, m in probe.received['pulsejet/velocity'])
+    assert all(math.isfinite(m.wrench.force.x) for _, m in probe.received['pulsejet/thrust'])
+    assert sim.stop() == 1   # the run failed: non-zero exit even when stopped by a signal
+
+
+@pytest.mark.timeout(120)
+def test_blow_up_with_duration_exits_non_zero(start_node, probe):
+    from pulsejet_sim.models.base import Command
+    sim = start_node(real_time_factor=2.0, duration_s=60.0)
+    probe.wait_for_subscribers()
+    wait_running(probe, sim, 0.1)
+    probe.send('valve', 0.0)
+    probe.send('pump_flow', Command.LIMITS['pump_flow_m3_s'][1])
+    probe.spin_until(lambda: not sim.alive(), timeout=30.0, what='sim_node to exit after the blow-up')
+    assert sim.proc.returncode == 1, sim.output()[-3000:]
+    assert 'physics blew up' in sim.output()
+
+
+@pytest.mark.timeout(120)
+def test_controller_follows_clock_and_parameter_overrides(start_node, probe):
+    """controller_node driven by a /clock we publish: the routine's phases in simulated time, with
+    parameters overridden on the command line."""
+    from builtin_interfaces.msg import Time
+    ctrl = start_node('pulsejet_ctrl.controller_node', pump_flow_m3_s=1.0e-3, inflate_s=0.5, hold_s=0.1,
+                      jet_s=0.4, cycles=1, rate_hz=50.0, target_volume_m3=0.0)
+    got = {'pump_flow': [], 'valve': [], 'cable_force': []}
+    subs = [probe.node.create_subscription(Float64, f'pulsejet/cmd/{name}',
+                                           lambda m, name=name: got[name].append(m.data), QOS) for name in got]
+    clock_pub = probe.node.create_publisher(Clock, '/clock', QOS)
+    probe.spin_until(lambda: clock_pub.get_subscription_count() >= 2   # the probe's own + the controller's
+                     and all(s.get_publisher_count() > 0 for s in subs), 60.0,
+                     'controller_node to match /clock and the command topics')
+
+    def at(t):
+        n0 = len(got['valve'])
+        ns = round(t * 1e9)
+        clock_pub.publish(Clock(clock=Time(sec=ns // 10**9, nanosec=ns % 10**9)))
+        probe.spin_until(lambda: len(got['valve']) > n0 and len(got['pump_flow']) > n0
+                         and len(got['cable_force']) > n0, 10.0, f'a command at t={t}')
+        return got['pump_flow'][-1], got['valve'][-1], got['cable_force'][-1]
+
+    assert at(0.0) == (1.0e-3, 0.0, 0.0)          # inflate: pump on, valve shut
+    assert at(0.3) == (1.0e-3, 0.0, 0.0)
+    assert at(0.55) == (0.0, 0.0, 0.0)            # hold
+    assert at(0.7) == (0.0, 1.0, 0.0)             # jet
+    assert at(1.2) == (0.0, 1.0, 0.0)             # done after 1 cycle: valve left open, pump off
+    # no command between two rate ticks (50 Hz of simulated time)
+    n = len(got['valve'])
+    ns = round(1.205e9)
+    clock_pub.publish(Clock(clock=Time(sec=ns // 10**9, nanosec=ns % 10**9)))
+    probe.spin_for(0.3)
+    assert len(got['valve']) == n
+    assert ctrl.alive(), ctrl.output()[-3000:]
+    assert ctrl.stop() == 0, ctrl.output()[-3000:]
+
+
+@pytest.mark.timeout(120)
+def test_controller_target_volume_mode(start_node, probe):
+    """With target_volume_m3 > 0 the inflation ends when pulsejet/volume reaches the target."""
+    from builtin_interfaces.msg import Time
+    ctrl = start_node('pulsejet_ctrl.controller_node', pump_flow_m3_s=1.0e-3, inflate_s=100.0,
+                      target_volume_m3=2.0e-3, hold_s=0.1, jet_s=0.4, cycles=0)
+    got = []
+    sub = probe.node.create_subscription(Float64, 'pulsejet/cmd/pump_flow', lambda m: got.append(m.data), QOS)
+    clock_pub = probe.node.create_publisher(Clock, '/clock', QOS)
+    volume_pub = probe.node.create_publisher(Float64, 'pulsejet/volume', QOS)
+    probe.spin_until(lambda: clock_pub.get_subscription_count() >= 2 and volume_pub.get_subscription_count() >= 2
+                     and sub.get_publisher_count() > 0, 60.0, 'controller_node to match its topics')
+
+    def at(t, volume):
+        volume_pub.publish(Float64(data=volume))
+        probe.spin_for(0.2)   # the volume arrives before the clock tick that uses it
+        n0 = len(got)
+        ns = round(t * 1e9)
+        clock_pub.publish(Clock(clock=Time(sec=ns // 10**9, nanosec=ns % 10**9)))
+        probe.spin_until(lambda: len(got) > n0, 10.0, f'a command at t={t}')
+        return got[-1]
+
+    assert at(0.0, 1.0e-3) == 1.0e-3
+    assert at(1.0, 1.9e-3) == 1.0e-3     # below the target: still inflating
+    assert at(1.1, 2.05e-3) == 0.0       # target reached: hold
+    assert ctrl.stop() == 0, ctrl.output()[-3000:]
