@@ -26,6 +26,7 @@ setup(
             'sim_node = pulsejet_sim.sim_node:main',
             'controller_node = pulsejet_ctrl.controller_node:main',
             'recorder = pulsejet_sim.recorder:main',
+            'replay = pulsejet_sim.replay:main',
             'pulsejet = pulsejet_sim.cli:main',
         ],
     },

@@ -1,5 +1,5 @@
 """`pulsejet`: offline tools. `pulsejet run SCENE`, `pulsejet summary FILE.mcap`, `pulsejet plot FILE.mcap`,
-`pulsejet scenes`."""
+`pulsejet resim FILE.mcap`, `pulsejet scenes`."""
 from __future__ import annotations
 
 import argparse
@@ -46,13 +46,14 @@ def _scenes(argv: list[str]) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    from pulsejet_sim import analysis
-    commands = {'run': _run, 'summary': analysis.main_summary, 'plot': analysis.main_plot, 'scenes': _scenes}
+    from pulsejet_sim import analysis, resim
+    commands = {'run': _run, 'summary': analysis.main_summary, 'plot': analysis.main_plot,
+                'resim': resim.main_resim, 'scenes': _scenes}
     if not argv or argv[0] in ('-h', '--help') or argv[0] not in commands:
         if argv and argv[0] not in ('-h', '--help'):
             print(f'pulsejet: unknown command {argv[0]!r}; allowed: {", ".join(commands)}', file=sys.stderr)
         print('usage: pulsejet {run SCENE [--duration S] [--out FILE.mcap] | summary FILE.mcap | '
-              'plot FILE.mcap [--out PNG] | scenes}', file=sys.stderr)
+              'plot FILE.mcap [--out PNG] | resim FILE.mcap [--scene S] [--tolerance T] | scenes}', file=sys.stderr)
         return 0 if argv and argv[0] in ('-h', '--help') else 2
     return int(commands[argv[0]](argv[1:]) or 0)
 

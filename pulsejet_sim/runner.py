@@ -10,6 +10,8 @@ from pulsejet_ctrl.routines import routine_from_scene
 from pulsejet_sim import messages
 import threading
 
+import yaml
+
 from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
 from pulsejet_sim.models.base import Command
 from pulsejet_sim.scene import Scene
@@ -44,6 +46,10 @@ def run_scene(scene: Scene, duration_s: float | None = None, out: str | Path | N
     total_batches = int(math.ceil(duration_s / (batch * scene.model.dt_s) - 1e-9))
     ledger_every = max(1, int(round(LEDGER_PERIOD_S / (batch * scene.model.dt_s))))
     writer = BagWriter(out) if out is not None else None
+    if writer is not None:
+        # the scene travels with the recording, so `pulsejet resim FILE` needs nothing else
+        writer.add_metadata('pulsejet', {'scene': scene.name, 'scene_yaml': yaml.safe_dump(
+            dict(scene.data, name=scene.name), sort_keys=False)})
     # Ctrl-C or SIGTERM during a long offline run still leaves a complete, readable file
     restore_signals = (install_signal_handlers(writer)
                        if writer is not None and threading.current_thread() is threading.main_thread() else None)

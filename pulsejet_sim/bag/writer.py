@@ -201,6 +201,12 @@ class BagWriter:
             self.add_topic(name, type_name_of(msg))
         self.write(name, serialize_message(msg), log_time_ns)
 
+    def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
+        """Write an MCAP metadata record (string keys and values), e.g. the scene a run used."""
+        self._check_open()
+        with self._mutating():
+            self._writer.add_metadata(name, {str(k): str(v) for k, v in metadata.items()})
+
     def flush(self) -> None:
         """Close the open chunk and push everything to the OS (a later hard kill cannot lose it)."""
         if not self._closed:
