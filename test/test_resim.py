@@ -102,7 +102,10 @@ def test_perturbed_bag_is_detected_and_cli_exit_codes(recording: Path, tmp_path:
     assert 'MISMATCH' in capsys.readouterr().out
     big = result.max_error * 2
     assert main_resim([str(modified), '--scene', 'pump_cycle', '--tolerance', repr(big)]) == 0
-    assert main_resim([str(recording)]) == 2                        # the file does not name its scene
+    assert main_resim([str(recording)]) == 0                        # the runner stored its scene
+    capsys.readouterr()
+    anonymous = rewrite(recording, tmp_path / 'anonymous.mcap', lambda topic, ns, cdr: (ns, cdr))
+    assert main_resim([str(anonymous)]) == 2                        # this copy does not name its scene
     assert 'does not name its scene' in capsys.readouterr().err
     assert main_resim([str(tmp_path / 'missing.mcap'), '--scene', 'pump_cycle']) == 2
     assert main_resim([str(recording), '--scene', 'no_such_scene']) == 2
