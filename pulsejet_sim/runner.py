@@ -1,23 +1,59 @@
 """Offline runner: the same model, Simulation.step and routine as the live nodes, as fast as the
-machine allows, no DDS; writes the same topics to MCAP (log time = simulation time)."""
+machine allows, no DDS; writes the same topics to MCAP (log time = simulation time).
+
+`Drive` is the loop itself (no ROS): the MCAP runner and `pulsejet sweep` both iterate it.
+"""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import threading
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 from pulsejet_ctrl.routines import routine_from_scene
-from pulsejet_sim import messages
-import threading
-
-import yaml
-
-from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
-from pulsejet_sim.models.base import Command
+from pulsejet_sim.models.base import Command, Observation, SimulationBlowUp
 from pulsejet_sim.scene import Scene
 from pulsejet_sim.simulation import Simulation
 
 LEDGER_PERIOD_S = 0.2   # energy ledger messages at 5 Hz, as sim_node publishes them
+
+
+def steps_per_publication(scene: Scene) -> int:
+    return max(1, int(round(1.0 / (scene.publish_rate_hz * scene.model.dt_s))))
+
+
+@dataclass
+class Drive:
+    """Steps a scene in publication-sized batches, each command from the scene's routine (or the
+    scene's initial command), like sim_node + controller_node at an ideal rate. Iterating yields
+    (time_s at the batch start, command held, observation after the batch); a blow-up ends the
+    iteration and is kept in `fault`."""
+
+    scene: Scene
+    duration_s: float
+    sim: Simulation = field(init=False)
+    fault: str | None = field(init=False, default=None)
+
+    def __post_init__(self):
+        if not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise ValueError(f'duration_s={self.duration_s!r} rejected; allowed: a positive finite number of seconds')
+        self.sim = Simulation(self.scene.model)
+        self.routine = routine_from_scene(self.scene.routine)
+        self.batch = steps_per_publication(self.scene)
+        self.batches = int(math.ceil(self.duration_s / (self.batch * self.scene.model.dt_s) - 1e-9))
+
+    def __iter__(self) -> Iterator[tuple[float, Command, Observation]]:
+        obs = self.sim.observe()
+        for _ in range(self.batches):
+            start_s = self.sim.time_s
+            command = self.routine.command(start_s, obs.volume_m3) if self.routine else self.sim.command
+            try:
+                obs = self.sim.step(self.batch, command)
+            except SimulationBlowUp as err:   # stop, keep what was good
+                self.fault = str(err)
+                return
+            yield start_s, command, obs
 
 
 @dataclass
@@ -28,82 +64,63 @@ class RunResult:
     fault: str | None
 
 
-def steps_per_publication(scene: Scene) -> int:
-    return max(1, int(round(1.0 / (scene.publish_rate_hz * scene.model.dt_s))))
-
-
-def run_scene(scene: Scene, duration_s: float | None = None, out: str | Path | None = None,
-              on_observation=None) -> RunResult:
+def run_scene(scene: Scene, duration_s: float | None = None, out: str | Path | None = None) -> RunResult:
     """Run `scene` for duration_s of simulated time (default: the scene's), writing MCAP to `out`
     if given. A blow-up ends the run early: the file keeps everything before it, and the fault is
     returned (never a NaN message)."""
-    duration_s = scene.duration_s if duration_s is None else float(duration_s)
-    if not (math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f'duration_s={duration_s!r} rejected; allowed: a positive finite number of seconds')
-    sim = Simulation(scene.model)
-    routine = routine_from_scene(scene.routine)
-    batch = steps_per_publication(scene)
-    total_batches = int(math.ceil(duration_s / (batch * scene.model.dt_s) - 1e-9))
-    ledger_every = max(1, int(round(LEDGER_PERIOD_S / (batch * scene.model.dt_s))))
-    writer = BagWriter(out) if out is not None else None
-    if writer is not None:
-        # the scene travels with the recording, so `pulsejet resim FILE` needs nothing else
-        writer.add_metadata('pulsejet', {'scene': scene.name, 'scene_yaml': yaml.safe_dump(
-            dict(scene.data, name=scene.name), sort_keys=False)})
+    drive = Drive(scene, scene.duration_s if duration_s is None else float(duration_s))
+    if out is None:
+        published = sum(1 for _ in drive)
+        return RunResult(path=None, sim=drive.sim, publications=published, fault=drive.fault)
+    return _record(drive, Path(out))
+
+
+def _record(drive: Drive, out: Path) -> RunResult:
+    import yaml
+
+    from pulsejet_sim import messages
+    from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
+
+    sim, scene = drive.sim, drive.scene
+    ledger_every = max(1, int(round(LEDGER_PERIOD_S / (drive.batch * scene.model.dt_s))))
+    writer = BagWriter(out)
+    # the scene travels with the recording, so `pulsejet resim FILE` needs nothing else
+    writer.add_metadata('pulsejet', {'scene': scene.name, 'scene_yaml': yaml.safe_dump(
+        dict(scene.data, name=scene.name), sort_keys=False)})
     # Ctrl-C or SIGTERM during a long offline run still leaves a complete, readable file
     restore_signals = (install_signal_handlers(writer)
-                       if writer is not None and threading.current_thread() is threading.main_thread() else None)
-    fault = None
+                       if threading.current_thread() is threading.main_thread() else None)
+
+    def write_state(obs: Observation, ledger: bool) -> None:
+        ns = messages.stamp_ns(obs.time_s)
+        for topic, msg in messages.observation_messages(obs):
+            writer.write_message(topic, msg, ns)
+        if ledger:
+            writer.write_message(messages.TOPIC_ENERGY_LEDGER, messages.ledger_message(sim.energy_ledger(), obs.time_s), ns)
+
     published = 0
     last_applied = None
     try:
-        obs = sim.observe()
-        _write_state(writer, obs, sim)
-        for i in range(total_batches):
-            command = routine.command(sim.time_s, obs.volume_m3) if routine else sim.command
-            if writer is not None:
-                ns = messages.stamp_ns(sim.time_s)
-                for topic, msg in messages.command_messages(command):
-                    writer.write_message(topic, msg, ns)
-                if command != last_applied:
-                    writer.write_message(messages.TOPIC_APPLIED_COMMAND,
-                                         messages.applied_command_message(command, sim.time_s), ns)
-                    last_applied = command
-            try:
-                obs = sim.step(batch, command)
-            except Exception as err:   # SimulationBlowUp: stop, keep what was good
-                fault = str(err)
-                break
+        write_state(sim.observe(), ledger=True)
+        for start_s, command, obs in drive:
+            ns = messages.stamp_ns(start_s)
+            for topic, msg in messages.command_messages(command):
+                writer.write_message(topic, msg, ns)
+            if command != last_applied:
+                writer.write_message(messages.TOPIC_APPLIED_COMMAND, messages.applied_command_message(command, start_s), ns)
+                last_applied = command
             published += 1
-            if on_observation is not None:
-                on_observation(obs)
-            _write_state(writer, obs, sim, ledger=(i + 1) % ledger_every == 0 or i + 1 == total_batches)
+            write_state(obs, ledger=published % ledger_every == 0 or published == drive.batches)
+        if drive.fault is not None:
+            write_state(sim.observe(), ledger=True)
     finally:
-        if writer is not None:
-            if fault is not None:
-                writer.write_message(messages.TOPIC_ENERGY_LEDGER,
-                                     messages.ledger_message(sim.energy_ledger(), sim.time_s),
-                                     messages.stamp_ns(sim.time_s))
-            writer.close()
+        writer.close()
         if restore_signals is not None:
             restore_signals()
-    return RunResult(path=Path(out) if out is not None else None, sim=sim, publications=published, fault=fault)
-
-
-def _write_state(writer, obs, sim: Simulation, ledger: bool = True) -> None:
-    if writer is None:
-        return
-    ns = messages.stamp_ns(obs.time_s)
-    for topic, msg in messages.observation_messages(obs):
-        writer.write_message(topic, msg, ns)
-    if ledger:
-        writer.write_message(messages.TOPIC_ENERGY_LEDGER, messages.ledger_message(sim.energy_ledger(), obs.time_s), ns)
+    return RunResult(path=out, sim=sim, publications=published, fault=drive.fault)
 
 
 def default_output(scene: Scene) -> Path:
     import datetime
     stamp = datetime.datetime.now().strftime('%Y%m%d-%H%M%S')
     return Path('runs') / f'{scene.name}-{stamp}.mcap'
-
-
-__all__ = ['run_scene', 'RunResult', 'steps_per_publication', 'default_output', 'Command']
