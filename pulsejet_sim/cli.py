@@ -1,5 +1,5 @@
 """`pulsejet`: offline tools. `pulsejet run SCENE`, `pulsejet summary FILE.mcap`, `pulsejet plot FILE.mcap`,
-`pulsejet resim FILE.mcap`, `pulsejet scenes`."""
+`pulsejet resim FILE.mcap`, `pulsejet sweep SWEEP`, `pulsejet scenes`."""
 from __future__ import annotations
 
 import argparse
@@ -44,16 +44,24 @@ def _scenes(argv: list[str]) -> int:
     return 0
 
 
+def _lazy(module: str, function: str):
+    """Import a sub-command's module only when it runs (sweep workers must not pull in rclpy)."""
+    def call(argv: list[str]) -> int:
+        import importlib
+        return getattr(importlib.import_module(f'pulsejet_sim.{module}'), function)(argv)
+    return call
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    from pulsejet_sim import analysis, resim
-    commands = {'run': _run, 'summary': analysis.main_summary, 'plot': analysis.main_plot,
-                'resim': resim.main_resim, 'scenes': _scenes}
+    commands = {'run': _run, 'summary': _lazy('analysis', 'main_summary'), 'plot': _lazy('analysis', 'main_plot'),
+                'resim': _lazy('resim', 'main_resim'), 'sweep': _lazy('sweep', 'main_sweep'), 'scenes': _scenes}
     if not argv or argv[0] in ('-h', '--help') or argv[0] not in commands:
         if argv and argv[0] not in ('-h', '--help'):
             print(f'pulsejet: unknown command {argv[0]!r}; allowed: {", ".join(commands)}', file=sys.stderr)
         print('usage: pulsejet {run SCENE [--duration S] [--out FILE.mcap] | summary FILE.mcap | '
-              'plot FILE.mcap [--out PNG] | resim FILE.mcap [--scene S] [--tolerance T] | scenes}', file=sys.stderr)
+              'plot FILE.mcap [--out PNG] | resim FILE.mcap [--scene S] [--tolerance T] | '
+              'sweep SWEEP.yaml [--workers N] [--out DIR] | scenes}', file=sys.stderr)
         return 0 if argv and argv[0] in ('-h', '--help') else 2
     return int(commands[argv[0]](argv[1:]) or 0)
 

@@ -1,0 +1,260 @@
+"""`pulsejet sweep`: a grid of scene variants run in parallel, one CSV row and one bar per run.
+
+Runs are submitted through a `concurrent.futures.Executor` (`submit` + `as_completed`): the local
+process pool is the default, and a cluster engine's executor (Dask's `distributed.Client` offers
+the same interface, Ray has one too) can take its place without touching scenes or models. Each
+run is a plain, picklable `RunSpec` evaluated by `run_one`, which imports no ROS.
+
+Sweep file (YAML)::
+
+    name: lumped_stiffness
+    duration_s: 6.0
+    metric: peak_speed_m_s        # what the bar plot compares
+    studies:                      # one or more; each is the product of its axes
+      main:
+        base: escape              # scene name or path
+        axes:
+          stiffness:              # axis name -> {label: overrides merged into the scene}
+            soft: {material: {stiffness_n_m: 1000}}
+            paper: {material: {stiffness_n_m: 2094}}
+          energy_model:
+            consistent: {options: {energy_model: consistent}}
+            paper: {options: {energy_model: paper}}
+
+An axis value may also hold `scene: OTHER` to switch the base scene (e.g. cone vs ellipsoid).
+"""
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as futures
+import csv
+import itertools
+import math
+import multiprocessing
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+METRICS = ('peak_speed_m_s', 'mean_speed_m_s', 'distance_m', 'peak_thrust_n', 'max_radius_m',
+           'volume_min_m3', 'volume_max_m3', 'closure_relative')
+
+
+class SweepError(ValueError):
+    """A sweep file that cannot be run (names the key, the value and what is allowed)."""
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    study: str
+    labels: tuple[tuple[str, str], ...]      # (axis, label) pairs
+    scene: str
+    overrides: Mapping[str, Any]
+    duration_s: float
+
+    @property
+    def name(self) -> str:
+        return '/'.join([self.study] + [label for _, label in self.labels])
+
+
+@dataclass
+class RunRow:
+    name: str
+    study: str
+    labels: dict[str, str]
+    fault: str = ''
+    wall_s: float = 0.0
+    simulated_s: float = 0.0
+    metrics: dict[str, float] = field(default_factory=dict)
+
+
+def merge(base: Mapping, override: Mapping) -> dict:
+    from pulsejet_sim.scene import merge as scene_merge
+    return scene_merge(dict(base), dict(override))
+
+
+def run_one(spec: RunSpec) -> RunRow:
+    """Run one variant without ROS and measure it (the executor's unit of work)."""
+    from pulsejet_sim.runner import Drive
+    from pulsejet_sim.scene import load_scene
+    start = time.perf_counter()
+    row = RunRow(name=spec.name, study=spec.study, labels=dict(spec.labels))
+    try:
+        drive = Drive(load_scene(spec.scene, dict(spec.overrides)), spec.duration_s)
+    except ValueError as err:
+        row.fault = f'refused: {err}'
+        return row
+    speeds, thrusts, radii, volumes = [], [], [], []
+    for _, _, obs in drive:
+        speeds.append(obs.velocity_m_s)
+        thrusts.append(obs.thrust_n)
+        radii.append(obs.mantle_radius_m)
+        volumes.append(obs.volume_m3)
+    dt_pub = drive.batch * drive.sim.model.dt_s
+    row.fault = drive.fault or ''
+    row.wall_s = time.perf_counter() - start
+    row.simulated_s = drive.sim.time_s
+    if speeds:
+        row.metrics = {
+            'peak_speed_m_s': max(abs(v) for v in speeds),
+            'mean_speed_m_s': sum(abs(v) for v in speeds) / len(speeds),
+            'distance_m': sum(speeds) * dt_pub,
+            'peak_thrust_n': max(thrusts),
+            'max_radius_m': max(radii),
+            'volume_min_m3': min(volumes),
+            'volume_max_m3': max(volumes),
+            'closure_relative': drive.sim.energy_ledger()['closure_relative'],
+        }
+    return row
+
+
+def load_sweep(path: str | os.PathLike) -> tuple[dict, list[RunSpec]]:
+    """Read a sweep file and expand it into runs."""
+    p = Path(path)
+    if not p.is_file():
+        builtin = Path(__file__).resolve().parent.parent / 'config' / 'sweeps' / f'{path}.yaml'
+        if not builtin.is_file():
+            raise SweepError(f'sweep {str(path)!r} not found; allowed: a YAML path or a name under config/sweeps/')
+        p = builtin
+    data = yaml.safe_load(p.read_text())
+    if not isinstance(data, dict) or 'studies' not in data:
+        raise SweepError(f'{p}: top level must be a mapping with key studies (and name, duration_s, metric)')
+    unknown = set(data) - {'name', 'description', 'duration_s', 'metric', 'studies'}
+    if unknown:
+        raise SweepError(f'{p}: {sorted(unknown)[0]}: unknown key; allowed: name, description, duration_s, metric, studies')
+    duration = data.get('duration_s', 5.0)
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not (0 < duration < 1e6):
+        raise SweepError(f'{p}: duration_s: {duration!r} rejected; allowed: a number of seconds in (0, 1e6)')
+    metric = data.get('metric', 'peak_speed_m_s')
+    if metric not in METRICS:
+        raise SweepError(f'{p}: metric: {metric!r} is not known; allowed: one of {", ".join(METRICS)}')
+    runs: list[RunSpec] = []
+    for study, body in data['studies'].items():
+        if not isinstance(body, dict) or 'base' not in body or not isinstance(body.get('axes', {}), dict):
+            raise SweepError(f'{p}: studies.{study}: allowed: a mapping with base (a scene) and axes')
+        axes = body.get('axes') or {}
+        choices = [[(axis, label, values or {}) for label, values in options.items()] for axis, options in axes.items()]
+        for combo in itertools.product(*choices) if choices else [()]:
+            scene = body['base']
+            overrides: dict = dict(body.get('overrides') or {})
+            for _, _, values in combo:
+                values = dict(values)
+                scene = values.pop('scene', scene)
+                overrides = merge(overrides, values)
+            runs.append(RunSpec(study=str(study), labels=tuple((a, str(lbl)) for a, lbl, _ in combo),
+                                scene=str(scene), overrides=overrides, duration_s=float(duration)))
+    meta = {'name': data.get('name', p.stem), 'metric': metric, 'duration_s': float(duration), 'path': str(p)}
+    return meta, runs
+
+
+def local_executor(workers: int | None = None) -> futures.Executor:
+    """A process pool on the local cores ('spawn': workers start clean, as remote ones would)."""
+    return futures.ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1,
+                                       mp_context=multiprocessing.get_context('spawn'))
+
+
+def run_sweep(runs: list[RunSpec], executor: futures.Executor | None = None, workers: int | None = None,
+              progress=sys.stderr) -> list[RunRow]:
+    """Run every spec through `executor` (default: a local process pool); rows in the runs' order."""
+    own = executor is None
+    executor = executor or local_executor(workers)
+    start = time.perf_counter()
+    rows: dict[int, RunRow] = {}
+    try:
+        pending = {executor.submit(run_one, spec): i for i, spec in enumerate(runs)}
+        for done in futures.as_completed(pending):
+            rows[pending[done]] = done.result()
+            if progress is not None:
+                _progress(progress, len(rows), len(runs), time.perf_counter() - start)
+    finally:
+        if own:
+            executor.shutdown(cancel_futures=True)
+    if progress is not None:
+        progress.write('\n')
+    return [rows[i] for i in range(len(runs))]
+
+
+def _progress(stream, done: int, total: int, elapsed_s: float) -> None:
+    width = 30
+    filled = int(width * done / max(total, 1))
+    eta = elapsed_s / done * (total - done) if done else math.nan
+    stream.write(f'\r[{"#" * filled}{"." * (width - filled)}] {done}/{total} runs, '
+                 f'{elapsed_s:5.1f} s elapsed, ~{eta:5.1f} s left')
+    stream.flush()
+
+
+def write_csv(rows: list[RunRow], path: Path) -> Path:
+    axes = sorted({a for r in rows for a in r.labels})
+    with open(path, 'w', newline='') as fh:
+        writer = csv.writer(fh)
+        writer.writerow(['run', 'study'] + axes + list(METRICS) + ['simulated_s', 'wall_s', 'fault'])
+        for r in rows:
+            writer.writerow([r.name, r.study] + [r.labels.get(a, '') for a in axes]
+                            + [repr(r.metrics[m]) if m in r.metrics else '' for m in METRICS]
+                            + [f'{r.simulated_s:.6g}', f'{r.wall_s:.3f}', r.fault])
+    return path
+
+
+def plot_bars(rows: list[RunRow], metric: str, path: Path) -> Path:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    studies = list(dict.fromkeys(r.study for r in rows))
+    fig, axes = plt.subplots(len(studies), 1, figsize=(max(8, 0.3 * len(rows)), 3.5 * len(studies)), squeeze=False)
+    for ax, study in zip(axes[:, 0], studies):
+        group = [r for r in rows if r.study == study]
+        values = [r.metrics.get(metric, 0.0) for r in group]
+        colours = ['tab:red' if r.fault else 'tab:blue' for r in group]
+        ax.bar(range(len(group)), values, color=colours)
+        ax.set_xticks(range(len(group)))
+        ax.set_xticklabels(['/'.join(r.labels.values()) for r in group], rotation=70, ha='right', fontsize=7)
+        ax.set_ylabel(metric)
+        ax.set_title(f'{study} (red: fault)')
+        ax.grid(axis='y', alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def main_sweep(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog='pulsejet sweep', description='Run a grid of scenes in parallel.')
+    parser.add_argument('sweep', help='sweep YAML path or a name under config/sweeps/')
+    parser.add_argument('--workers', type=int, default=None, help='processes (default: all cores)')
+    parser.add_argument('--out', default='runs/sweeps', help='output folder for the CSV and the plot')
+    parser.add_argument('--duration', type=float, default=None, help='override the sweep\'s duration_s')
+    args = parser.parse_args(argv)
+    try:
+        meta, runs = load_sweep(args.sweep)
+    except (SweepError, yaml.YAMLError) as err:
+        print(f'pulsejet sweep: {err}', file=sys.stderr)
+        return 2
+    if args.workers is not None and args.workers < 1:
+        print(f'pulsejet sweep: --workers {args.workers} rejected; allowed: 1 or more', file=sys.stderr)
+        return 2
+    if args.duration is not None:
+        runs = [RunSpec(r.study, r.labels, r.scene, r.overrides, args.duration) for r in runs]
+    print(f'{meta["name"]}: {len(runs)} runs of {runs[0].duration_s if runs else 0:g} s on '
+          f'{args.workers or os.cpu_count()} workers')
+    rows = run_sweep(runs, workers=args.workers)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path = write_csv(rows, out / f'{meta["name"]}.csv')
+    png_path = plot_bars(rows, meta['metric'], out / f'{meta["name"]}.png')
+    ranked = sorted((r for r in rows if r.metrics), key=lambda r: -r.metrics[meta['metric']])
+    print(f'top runs by {meta["metric"]}:')
+    for r in ranked[:5]:
+        print(f'  {r.metrics[meta["metric"]]:.4g}  {r.name}')
+    faults = [r for r in rows if r.fault]
+    for r in faults:
+        print(f'  FAULT {r.name}: {r.fault}')
+    print(f'table: {csv_path}\nplot:  {png_path}')
+    return 0
+
+
+__all__ = ['RunSpec', 'RunRow', 'run_one', 'load_sweep', 'run_sweep', 'local_executor', 'write_csv',
+           'plot_bars', 'main_sweep', 'asdict']
