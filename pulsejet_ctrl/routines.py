@@ -2,6 +2,7 @@
 a Command. The controller node and the offline runner drive the same objects."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Mapping
 
@@ -99,11 +100,66 @@ class PumpValveRoutine:
         return Command(0.0, self.valve_opening, 0.0)
 
 
+CABLE_SPEC = {
+    'kind': Choice('cable', ('cable',)),
+    'amplitude_n': Number(8.0, 0.0, Command.LIMITS['cable_force_n'][1], unit='N'),
+    'frequency_hz': Number(1.6, 0.0, 100.0, low_open=True, unit='Hz'),
+    'contraction_s': Number(0.2, 0.0, 100.0, low_open=True, unit='s'),
+    'release_s': Number(0.3, 0.0, 100.0, low_open=True, unit='s'),
+    'start_delay_s': Number(0.0, 0.0, 1e6, unit='s'),
+}
+
+
+@dataclass
+class CableRoutine:
+    """Periodic cable pull: a half-cosine rise to amplitude_n over contraction_s, a half-cosine
+    release over release_s, slack for the rest of the period (the shape of the shell model's
+    built-in routine, so live and offline runs pull alike)."""
+
+    amplitude_n: float = 8.0
+    frequency_hz: float = 1.6
+    contraction_s: float = 0.2
+    release_s: float = 0.3
+    start_delay_s: float = 0.0
+
+    def __post_init__(self):
+        if self.contraction_s + self.release_s > 1.0 / self.frequency_hz + 1e-12:
+            raise ModelError(f'routine: contraction_s + release_s = {self.contraction_s + self.release_s:g} s '
+                             f'exceeds the period 1/frequency_hz = {1.0 / self.frequency_hz:g} s; allowed: at most the period')
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any] | None) -> 'CableRoutine':
+        values = check_section('routine', config or {}, CABLE_SPEC)
+        values.pop('kind')
+        return cls(**values)
+
+    def reset(self) -> None:
+        """Stateless: the pull is a function of time alone."""
+
+    def activation(self, time_s: float) -> float:
+        t = time_s - self.start_delay_s
+        if t < 0.0:
+            return 0.0
+        period = 1.0 / self.frequency_hz
+        phase = t - period * math.floor(t / period)
+        if phase < self.contraction_s:
+            return 0.5 * (1.0 - math.cos(math.pi * phase / self.contraction_s))
+        if phase < self.contraction_s + self.release_s:
+            return 0.5 * (1.0 + math.cos(math.pi * (phase - self.contraction_s) / self.release_s))
+        return 0.0
+
+    def command(self, time_s: float, volume_m3: float | None = None) -> Command:
+        return Command(0.0, 1.0, self.amplitude_n * self.activation(time_s))
+
+
+ROUTINES = {'pump_valve': PumpValveRoutine, 'cable': CableRoutine}
+
+
 def routine_from_scene(routine: Mapping[str, Any] | None):
     """The routine a scene asks for (None: hold the scene's initial command)."""
     if routine is None:
         return None
     kind = routine.get('kind', 'pump_valve')
-    if kind == 'pump_valve':
-        return PumpValveRoutine.from_config(routine)
-    raise ModelError(f'routine.kind: {kind!r} is not known; allowed: pump_valve')
+    if kind not in ROUTINES:
+        raise ModelError(f'routine.kind: {kind!r} is not known; allowed: one of {", ".join(ROUTINES)}')
+    return ROUTINES[kind].from_config(routine)

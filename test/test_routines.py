@@ -40,3 +40,18 @@ def test_bad_routine_config_names_the_key():
         PumpValveRoutine.from_config({'pump_flow_m3_s': -1})
     with pytest.raises(ModelError, match='routine.speed: unknown key'):
         PumpValveRoutine.from_config({'speed': 3})
+
+
+def test_cable_routine_pulls_with_half_cosines_and_rests():
+    from pulsejet_ctrl.routines import CableRoutine, routine_from_scene
+    r = routine_from_scene({'kind': 'cable', 'amplitude_n': 10.0, 'frequency_hz': 1.0,
+                            'contraction_s': 0.2, 'release_s': 0.4})
+    assert isinstance(r, CableRoutine)
+    assert r.command(0.0).cable_force_n == 0.0
+    assert r.command(0.1).cable_force_n == pytest.approx(5.0)     # half-way up
+    assert r.command(0.2).cable_force_n == pytest.approx(10.0)    # peak
+    assert r.command(0.4).cable_force_n == pytest.approx(5.0)     # half-way down
+    assert r.command(0.8).cable_force_n == 0.0                     # slack
+    assert r.command(1.2).cable_force_n == pytest.approx(10.0)    # periodic
+    with pytest.raises(ModelError, match='exceeds the period'):
+        CableRoutine(frequency_hz=5.0, contraction_s=0.2, release_s=0.3)
