@@ -98,7 +98,7 @@ def _cone(g):
     # with d sin(beta) = rt; the cap spans polar angle 0 .. pi/2 - beta
     psi = math.pi / 2 - beta
     d = rt / math.sin(beta) if rt > 0 else 0.0
-    if d + rt * 0 >= L * 0.9:
+    if d >= L * 0.9:
         raise ModelError(f'geometry.tip_radius_m: {rt!r} m rounds off most of the cone; '
                          f'allowed: tip_radius_m < {0.9 * L * math.sin(beta):.4g} m')
     pts_r, pts_z = [], []
@@ -185,7 +185,11 @@ def build_profile(geometry: Mapping[str, Any], n_elements: int) -> Profile:
     X = np.linspace(0.0, s[-1], n_elements + 1)
     rn = np.interp(X, s, r)
     zn = np.interp(X, s, z)
-    th = np.interp(X, smid, ang)     # end values clamp to the end segments
+    # tangent angle at the arc-length positions of the nodes; at the two ends the segment-midpoint
+    # values are extrapolated linearly (2nd order), so a smooth pole gets theta0 = 0 to O(ds^2)
+    sm = np.concatenate([[0.0], smid, [s[-1]]])
+    am = np.concatenate([[ang[0] - 0.5 * (ang[1] - ang[0])], ang, [ang[-1] + 0.5 * (ang[-1] - ang[-2])]])
+    th = np.interp(X, sm, am)
     rn[0] = 0.0
     zn[-1] = 0.0
     if np.any(rn[1:] <= 0):

@@ -1,0 +1,681 @@
+"""Geometrically exact axisymmetric (Reissner) shell model of the mantle, coupled to a jet (paper 000).
+
+Model
+-----
+*Shell.*  The meridian (reference arc length X from the pole to the ring, see shell_geometry.py)
+is cut into N equal elements; every node carries ``(r, z, theta)``; strains, the Kelvin-Voigt law
+(half-thickness h, ``Psi = 2Eh/(1-nu^2)``, ``Psi2 = 6 eta_v h/(1-nu^2)``, ``Js = h^2/3``,
+``q = 2hG eta + 2h eta_v eta_dot``) and their discrete energy/dissipation are documented in
+shell_kernels.py.  Internal forces are exact gradients of the discrete elastic energy, the viscous
+ones come from a dissipation function, so the scheme conserves energy by construction when the
+viscosity and the fluid loads are off (tested).
+
+*Boundary conditions.*  Pole (node 0): ``r = 0`` and ``theta = theta0(0)`` (0 for a smooth pole),
+``z`` free.  Ring (node N): clamped to the rigid cap/nozzle, which is part of the vehicle.
+
+*Masses.*  Lumped: ``m_i = rho_s 2h A_i`` (A_i the node's share of the reference area
+``2 pi r0 dX``), rotary inertia ``m_i h^2/3`` (times ``material.rotary_inertia_scale``).
+Fluid added mass acts along the surface normal: ``m_a,i = C_a rho l_a A_i`` along the
+*reference* normal ``n0_i`` (l_a = ``fluid.added_mass_length_m``, default half the largest
+radius, i.e. the 2-D added mass per unit area ``rho a/2`` of a cylinder of radius a, times
+C_a = 1.1).  Using the reference normal keeps the mass matrix constant and the added-mass force
+conservative (kinetic energy ``1/2 m_a (n0 . v)^2``); it is approximate when the wall rotates a lot.
+
+*Frames.*  Positions are relative to the body; the axial node velocity is stored absolute
+(``w = z_dot + U``), which makes the mass matrix block diagonal.  The shell therefore feels the
+vehicle's motion exactly (its inertia, added mass and tangential drag see the absolute velocity,
+the "vehicle speed enters the shell's loads"), and the vehicle feels the shell only through the
+force at the clamped ring, the jet thrust and the inflow ram force.
+
+*Fluid and jet.*  Cavity volume ``V`` = sum of frusta between the shell and the ring plane (the
+rigid cap's own volume is not counted), ``V' = grad V . q_dot``.  Outflow (V' < 0) through
+``A_out``: ``u_j = -V'/A_out``, cavity pressure ``p = rho u_j^2/2`` acting on the inner surface
+(generalised force ``p grad V``; so the wall pays the jet's kinetic energy), thrust
+``C_f rho A_out u_j^2`` on the vehicle.  Inflow through ``A_in``: suction ``p = -rho u_in^2/2`` and
+the ram force ``rho V' U`` of bringing the ingested water to the vehicle speed.  The internal
+water ``rho V`` moves with the vehicle.  Vehicle: ``(M + m_x + rho V) U' = T - 1/2 C_d rho
+pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell:
+``-1/2 rho C_t A_i |v_t| v_t`` along the current tangent.
+
+*Energy ledger.*  Stored: elastic, shell + payload kinetic ("vehicle"), added-mass kinetic
+("outer fluid"), ``1/2 rho V U^2`` ("internal").  In: actuation work (cable force times wall
+velocity, plus ``dW/dt`` of the muscle's moving reference) is reported under ``in_pump_work``
+(the only "in" key of the contract).  Out: jet kinetic energy in the earth frame, drag (shell
+and vehicle), Kelvin-Voigt dissipation, and ``out_other`` = inflow mixing (suction kinetic energy
+and ram loss) + the thrust mismatch ``(1 - C_f) rho A u_j^2 U``.  With C_f = 1 all energy
+transfers are exact in the continuous model, so ``closure_error`` measures time discretisation
+only.
+
+*Axis contact.*  A deeply collapsed wall meets the opposite wall on the axis: below the contact
+radius ``min(h, r0/2)`` a conservative barrier (modulus E over the gap, log-barrier with a linear
+continuation) keeps the midsurface off the axis; its energy is part of ``stored_elastic``.  This
+lets > 80 % volume changes and soft (1 kPa) mantles run instead of crossing the axis.
+
+*Integrators* (``simulation.integrator``).  ``verlet``: explicit kick-drift-kick; its stable
+step (``stable_step_s``, from the generalised eigenvalues of stiffness and damping against the
+mass) is tiny for the Kelvin-Voigt viscosity of the robot (~1.3 us), so scenes above it are
+refused.  ``implicit_midpoint`` (default, 2nd order, energy conserving up to the nonlinearity)
+and ``backward_euler`` (1st order, L-stable, numerically dissipative: its ledger does not close
+at large steps) solve ``M (v* - v_n)/alpha = dt F(q_n + alpha dt v*, v*)`` by (modified) Newton
+with a banded Jacobian (half bandwidth 5; element stiffness by forward differences, viscous and
+drag damping exact) re-used across steps while it converges fast, plus a Sherman-Morrison
+correction for the rank-one jet-pressure term.  The vehicle speed is solved monolithically with
+the shell: it takes the slot of the clamped ring's axial dof, and by translation invariance
+``dF/dU* = alpha dt K[:, ring_z] + C[:, ring_z]``, so the system stays banded (a staggered
+vehicle update was unstable with stiff viscous walls).  A step whose Newton solve fails is
+retried as 4, 16, 64 sub-steps before SimulationBlowUp is raised.
+
+Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated)::
+
+    simulation: {dt_s, duration_s, integrator: implicit_midpoint|backward_euler|verlet,
+                 newton_tolerance: 1e-9, specialise_kernel: false}
+    geometry:   {kind: ellipsoid, semi_axis_axial_m, semi_axis_radial_m, opening_radius_m}
+              | {kind: cone, length_m, base_radius_m, tip_radius_m (0.2 base)}
+              | {kind: cap_cylinder, cap_radius_m, cap_opening_rad, cylinder_length_m}
+              | {kind: points, points: [[r, z], ...] from the pole (r = 0) to the ring}
+    mesh:       {elements: 4..400}
+    material:   {youngs_modulus_pa, viscosity_pa_s, poisson_ratio, half_thickness_m, density_kg_m3,
+                 shear_correction: 1, rotary_inertia_scale: 1}
+    fluid:      {density_kg_m3, added_mass_coefficient: 1.1, added_mass_length_m: max(r0)/2,
+                 tangential_drag_coefficient: 0.05, drag_coefficient: 1.0}
+    jet:        {outlet_radius_m: ring/2, inlet_area_m2: A_out + 3 pi (10 mm)^2, thrust_coefficient: 1}
+    vehicle:    {mass_kg (shell + payload), added_mass_kg: 0, initial_velocity_m_s: 0}
+    actuation:  {kind: none|cable|muscle, source: routine|command (cable only),
+                 amplitude (cable: peak total radial pull, N; muscle: fractional drop of the desired
+                 hoop radius, 0..0.95), distribution: uniform|rising|falling (cable),
+                 taper_fraction: 0.15 (muscle), frequency_hz, contraction_s, release_s, start_delay_s}
+    terms:      {viscosity, drag, added_mass, jet, vehicle_motion: all true}
+    load:       {internal_pressure_pa: 0}   (static pressure load, for tests)
+    initial:    {radial_perturbation_m: 0}  (r += d sin(pi X/L) at t = 0)
+
+The cable routine: activation ``a(t)`` rises as a half cosine over ``contraction_s``, falls over
+``release_s`` and rests for the rest of the period; the cable pull is ``amplitude * a(t)``
+distributed over the free nodes with weights uniform, proportional to X/L (``rising``: largest
+at the ring) or to 1 - X/L (``falling``: largest at the pole).  The muscle routine lowers the
+desired hoop stretch to ``tau_d = 1 - amplitude a(t) s(X)`` (``s`` = 1 with smooth tapers at the
+ends); the work it does is ``dW/dt`` at fixed shape.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+from pulsejet_sim.models import shell_kernels as sk
+from pulsejet_sim.models.base import Command, ModelError, Observation, SimulationBlowUp
+from pulsejet_sim.models.shell_geometry import Profile, build_profile
+
+_KERNELS: dict = {}
+INTEGRATORS = {'verlet': (0, 1.0), 'implicit_midpoint': (1, 0.5), 'backward_euler': (1, 1.0)}
+SECTIONS = ('model', 'name', 'description', 'simulation', 'geometry', 'mesh', 'material', 'fluid',
+            'vehicle', 'jet', 'actuation', 'terms', 'initial', 'load')
+TERMS = {'viscosity': True, 'drag': True, 'added_mass': True, 'jet': True, 'vehicle_motion': True}
+ACTUATION_KINDS = ('none', 'cable', 'muscle')
+DISTRIBUTIONS = ('uniform', 'rising', 'falling')
+ERR_TEXT = {
+    sk.ERR_NONFINITE: 'non-finite state (NaN/inf)',
+    sk.ERR_AXIS: 'the mantle wall crossed the symmetry axis (r < 0): the collapse is too deep for this '
+                 'shell; reduce the actuation amplitude',
+    sk.ERR_BOUNDS: 'state out of bounds (a node or its speed ran away)',
+    sk.ERR_NEWTON: 'the implicit Newton solve did not converge even with 64 sub-steps; use a smaller dt_s',
+}
+
+
+def _section(scene, key, required=True):
+    sec = scene.get(key)
+    if sec is None:
+        if required:
+            raise ModelError(f'{key}: missing section; allowed: a mapping (see config/shell_robot.yaml)')
+        return {}
+    if not isinstance(sec, Mapping):
+        raise ModelError(f'{key}: {sec!r} is not a mapping; allowed: a mapping of parameters')
+    return sec
+
+
+def _num(sec, key, where, low, high, default=None, low_open=False):
+    if key not in sec:
+        if default is None:
+            raise ModelError(f'{where}.{key}: missing; allowed: a number in {"(" if low_open else "["}{low}, {high}]')
+        return float(default)
+    value = sec[key]
+    if isinstance(value, bool):
+        raise ModelError(f'{where}.{key}: {value!r} is not a number; allowed: a number in [{low}, {high}]')
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ModelError(f'{where}.{key}: {value!r} is not a number; allowed: a number in [{low}, {high}]') from None
+    if not math.isfinite(v) or v < low or v > high or (low_open and v == low):
+        raise ModelError(f'{where}.{key}: {value!r} is out of range; allowed: a number in '
+                         f'{"(" if low_open else "["}{low}, {high}]')
+    return v
+
+
+def _choice(sec, key, where, allowed, default):
+    value = sec.get(key, default)
+    if value not in allowed:
+        raise ModelError(f'{where}.{key}: {value!r} is not known; allowed: one of {", ".join(map(str, allowed))}')
+    return value
+
+
+def _unknown(sec, where, allowed):
+    for k in sec:
+        if k not in allowed:
+            raise ModelError(f'{where}.{k}: unknown key (value {sec[k]!r}); allowed: {", ".join(allowed)}')
+
+
+class ShellModel:
+    """Axisymmetric Reissner shell mantle + jet + vehicle (implements the Model protocol)."""
+
+    name = 'shell'
+
+    def __init__(self, *, profile: Profile, dt_s: float, integrator: str, flags: int, P: np.ndarray,
+                 E: np.ndarray, Nd: np.ndarray, node_mass: np.ndarray, node_added_mass: np.ndarray,
+                 n0: np.ndarray, payload_kg: float, body_added_mass_kg: float, actuation: dict,
+                 initial_perturbation_m: float = 0.0, initial_velocity_m_s: float = 0.0,
+                 duration_s: float | None = None):
+        self.ref = profile
+        self.dt_s = float(dt_s)
+        self.integrator = integrator
+        self.scheme, self.alpha = INTEGRATORS[integrator]
+        self.flags = int(flags)
+        self.P = P
+        self.E = E
+        self.Nd = Nd
+        self.node_mass = node_mass
+        self.node_added_mass = node_added_mass
+        self.n0 = n0
+        self.payload_kg = payload_kg
+        self.body_added_mass_kg = body_added_mass_kg
+        self.actuation = actuation
+        self.initial_perturbation_m = initial_perturbation_m
+        self.initial_velocity_m_s = initial_velocity_m_s
+        self.duration_s = duration_s
+        self.n_nodes = profile.X.size
+        self.substep_events = 0
+        self.specialise_kernel = False
+        self._initial_energy = None
+        self._initial_energy = self._stored(self.initial_state())[0]
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_scene(cls, scene: Mapping[str, Any]) -> 'ShellModel':
+        """Build from a parsed scene dict (schema: config/shell_robot.yaml).  Raises ModelError
+        naming the key, the bad value and what is allowed."""
+        if not isinstance(scene, Mapping):
+            raise ModelError(f'scene: {scene!r} is not a mapping')
+        for k in scene:
+            if k not in SECTIONS:
+                raise ModelError(f'{k}: unknown section for the shell model (value {scene[k]!r}); allowed: '
+                                 f'{", ".join(SECTIONS)}')
+        if scene.get('model', 'shell') != 'shell':
+            raise ModelError(f'model: {scene.get("model")!r} is not the shell model; allowed: shell')
+        sim = _section(scene, 'simulation')
+        dt = _num(sim, 'dt_s', 'simulation', 0.0, 0.1, low_open=True)
+        integrator = _choice(sim, 'integrator', 'simulation', tuple(INTEGRATORS), 'implicit_midpoint')
+        duration = _num(sim, 'duration_s', 'simulation', 0.0, 1e6, default=10.0)
+        tol = _num(sim, 'newton_tolerance', 'simulation', 1e-14, 1e-4, default=1e-9)
+        spec = sim.get('specialise_kernel', False)
+        if not isinstance(spec, bool):
+            raise ModelError(f'simulation.specialise_kernel: {spec!r} is not a boolean; allowed: true or false')
+
+        mesh = _section(scene, 'mesh')
+        _unknown(mesh, 'mesh', ('elements',))
+        ne = mesh.get('elements')
+        if isinstance(ne, bool) or not isinstance(ne, int) or not 4 <= ne <= 400:
+            raise ModelError(f'mesh.elements: {ne!r} rejected; allowed: an integer in [4, 400]')
+
+        geo = _section(scene, 'geometry')
+        profile = build_profile(geo, ne)
+
+        mat = _section(scene, 'material')
+        _unknown(mat, 'material', ('youngs_modulus_pa', 'viscosity_pa_s', 'poisson_ratio', 'half_thickness_m',
+                                   'density_kg_m3', 'shear_correction', 'rotary_inertia_scale'))
+        Ey = _num(mat, 'youngs_modulus_pa', 'material', 10.0, 1e10)
+        eta_v = _num(mat, 'viscosity_pa_s', 'material', 0.0, 1e7)
+        nu = _num(mat, 'poisson_ratio', 'material', 0.0, 0.49)
+        h = _num(mat, 'half_thickness_m', 'material', 1e-6, 0.1)
+        rho_s = _num(mat, 'density_kg_m3', 'material', 10.0, 30000.0)
+        kappa = _num(mat, 'shear_correction', 'material', 0.1, 1.0, default=1.0)
+        rot = _num(mat, 'rotary_inertia_scale', 'material', 1.0, 1e6, default=1.0)
+        rmax0 = float(profile.r0.max())
+        if h > 0.25 * rmax0:
+            raise ModelError(f'material.half_thickness_m: {h!r} m is not thin against the mantle radius {rmax0:.4g} m; '
+                             f'allowed: half_thickness_m <= {0.25 * rmax0:.4g} m')
+
+        terms_sec = _section(scene, 'terms', required=False)
+        _unknown(terms_sec, 'terms', tuple(TERMS))
+        terms = dict(TERMS)
+        for k, v in terms_sec.items():
+            if not isinstance(v, bool):
+                raise ModelError(f'terms.{k}: {v!r} is not a boolean; allowed: true or false')
+            terms[k] = v
+
+        fl = _section(scene, 'fluid')
+        _unknown(fl, 'fluid', ('density_kg_m3', 'added_mass_coefficient', 'added_mass_length_m',
+                               'tangential_drag_coefficient', 'drag_coefficient'))
+        rho = _num(fl, 'density_kg_m3', 'fluid', 1.0, 20000.0)
+        Ca = _num(fl, 'added_mass_coefficient', 'fluid', 0.0, 10.0, default=1.1)
+        la = _num(fl, 'added_mass_length_m', 'fluid', 0.0, 10.0, default=0.5 * rmax0)
+        Ct = _num(fl, 'tangential_drag_coefficient', 'fluid', 0.0, 10.0, default=0.05)
+        Cd = _num(fl, 'drag_coefficient', 'fluid', 0.0, 10.0, default=1.0)
+
+        jet = _section(scene, 'jet', required=terms['jet'])
+        _unknown(jet, 'jet', ('outlet_radius_m', 'inlet_area_m2', 'thrust_coefficient'))
+        rring = profile.ring_radius_m
+        r_out = _num(jet, 'outlet_radius_m', 'jet', 1e-4, rring, default=0.5 * rring)
+        A_out = math.pi * r_out ** 2
+        A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01 ** 2)
+        Cf = _num(jet, 'thrust_coefficient', 'jet', 0.0, 2.0, default=1.0)
+
+        veh = _section(scene, 'vehicle', required=False)
+        _unknown(veh, 'vehicle', ('mass_kg', 'added_mass_kg', 'initial_velocity_m_s'))
+
+        act = _section(scene, 'actuation', required=False)
+        akind = _choice(act, 'kind', 'actuation', ACTUATION_KINDS, 'none')
+
+        load = _section(scene, 'load', required=False)
+        _unknown(load, 'load', ('internal_pressure_pa',))
+        pstat = _num(load, 'internal_pressure_pa', 'load', -1e6, 1e6, default=0.0)
+
+        init = _section(scene, 'initial', required=False)
+        _unknown(init, 'initial', ('radial_perturbation_m',))
+        pert = _num(init, 'radial_perturbation_m', 'initial', -0.5 * rmax0, 0.5 * rmax0, default=0.0)
+
+        # ---- elements (discrete reference values, see shell_kernels)
+        X, r0, z0, th0 = profile.X, profile.r0, profile.z0, profile.theta0
+        dr, dz = np.diff(r0), np.diff(z0)
+        ds = np.hypot(dr, dz)
+        thm = 0.5 * (th0[:-1] + th0[1:])
+        r0m = 0.5 * (r0[:-1] + r0[1:])
+        lam0 = (dr * np.cos(thm) + dz * np.sin(thm)) / ds
+        eta0 = (-dr * np.sin(thm) + dz * np.cos(thm)) / ds
+        mu0 = np.diff(th0) / ds
+        E = np.zeros((ne, sk.N_ECOLS))
+        E[:, sk.E_DS] = ds
+        E[:, sk.E_R0M] = r0m
+        E[:, sk.E_LAM0] = lam0
+        E[:, sk.E_ETA0] = eta0
+        E[:, sk.E_K0] = mu0 * lam0
+        E[:, sk.E_VS0] = np.sin(thm) / r0m
+        E[:, sk.E_AREA] = 2 * math.pi * r0m * ds
+        Xm = 0.5 * (X[:-1] + X[1:]) / X[-1]
+
+        # ---- nodes
+        n1 = ne + 1
+        area = np.zeros(n1)
+        area[:-1] += 0.5 * E[:, sk.E_AREA]
+        area[1:] += 0.5 * E[:, sk.E_AREA]
+        m = rho_s * 2 * h * area
+        ma = Ca * rho * la * area if terms['added_mass'] else np.zeros(n1)
+        n0 = np.stack([-np.sin(th0), np.cos(th0)], axis=1)
+        Nd = np.zeros((n1, sk.N_NCOLS))
+        Nd[:, sk.N_MRR] = m + ma * n0[:, 0] ** 2
+        Nd[:, sk.N_MRZ] = ma * n0[:, 0] * n0[:, 1]
+        Nd[:, sk.N_MZZ] = m + ma * n0[:, 1] ** 2
+        Nd[:, sk.N_MTT] = rot * m * h * h / 3.0
+        Nd[:, sk.N_DAREA] = area
+        # axis contact radius: one half-thickness (inner faces meet), but never more than half the
+        # node's reference radius (nodes next to the pole sit within a thickness of the axis)
+        Nd[:, sk.N_HC] = np.minimum(h, 0.5 * r0)
+        Nd[0, sk.N_FIXR] = 1.0
+        Nd[0, sk.N_FIXT] = 1.0
+        Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXZ] = Nd[-1, sk.N_FIXT] = 1.0
+        free = np.ones(n1, bool)
+        free[0] = free[-1] = False
+        shell_free_mass = float(m[:-1].sum())
+
+        # ---- vehicle
+        total = _num(veh, 'mass_kg', 'vehicle', 1e-6, 1e6, default=2.0 * shell_free_mass)
+        if total <= shell_free_mass:
+            raise ModelError(f'vehicle.mass_kg: {total!r} kg is not more than the moving shell mass '
+                             f'{shell_free_mass:.4g} kg; allowed: mass_kg > {shell_free_mass:.4g} (shell plus payload)')
+        mx = _num(veh, 'added_mass_kg', 'vehicle', 0.0, 1e6, default=0.0)
+        U0 = _num(veh, 'initial_velocity_m_s', 'vehicle', -100.0, 100.0, default=0.0)
+        payload = total - shell_free_mass
+
+        # ---- actuation
+        flags = 0
+        if terms['viscosity'] and eta_v > 0:
+            flags |= sk.F_VISC
+        if terms['drag']:
+            flags |= sk.F_DRAG
+        if terms['jet']:
+            flags |= sk.F_JET
+        if terms['vehicle_motion']:
+            flags |= sk.F_BODY
+        amp = 0.0
+        freq, tc, tr, delay = 1.0, 0.3, 0.3, 0.0
+        actuation = {'kind': akind, 'source': 'none'}
+        if akind != 'none':
+            common = ('kind', 'source', 'amplitude', 'frequency_hz', 'contraction_s', 'release_s', 'start_delay_s')
+            extra = ('distribution',) if akind == 'cable' else ('taper_fraction',)
+            _unknown(act, 'actuation', common + extra)
+            src = _choice(act, 'source', 'actuation', ('routine', 'command') if akind == 'cable' else ('routine',),
+                          'routine')
+            actuation['source'] = src
+            if akind == 'cable':
+                flags |= sk.F_CABLE
+                dist = _choice(act, 'distribution', 'actuation', DISTRIBUTIONS, 'uniform')
+                xi = X / X[-1]
+                shape = {'uniform': np.ones(n1), 'rising': xi, 'falling': 1.0 - xi}[dist]
+                w = shape * free
+                if w.sum() <= 0:
+                    raise ModelError(f'actuation.distribution: {dist!r} loads no free node; allowed: uniform')
+                Nd[:, sk.N_WC] = w / w.sum()
+                actuation['distribution'] = dist
+                if src == 'routine':
+                    amp = _num(act, 'amplitude', 'actuation', 0.0, 1000.0)
+            else:
+                flags |= sk.F_MUSCLE
+                amp = _num(act, 'amplitude', 'actuation', 0.0, 0.95)
+                taper = _num(act, 'taper_fraction', 'actuation', 0.01, 0.5, default=0.15)
+
+                def smooth(x):
+                    x = np.clip(x, 0.0, 1.0)
+                    return x * x * (3 - 2 * x)
+                E[:, sk.E_SMUS] = smooth(Xm / taper) * smooth((1 - Xm) / taper)
+                actuation['taper_fraction'] = taper
+            if src == 'routine':
+                flags |= sk.F_ROUTINE
+                freq = _num(act, 'frequency_hz', 'actuation', 0.0, 100.0, low_open=True)
+                per = 1.0 / freq
+                tc = _num(act, 'contraction_s', 'actuation', 0.0, per, low_open=True)
+                tr = _num(act, 'release_s', 'actuation', 0.0, per, low_open=True)
+                if tc + tr > per * (1 + 1e-12):
+                    raise ModelError(f'actuation.release_s: contraction_s + release_s = {tc + tr:.4g} s exceeds the '
+                                     f'period 1/frequency_hz = {per:.4g} s; allowed: contraction_s + release_s <= period')
+                delay = _num(act, 'start_delay_s', 'actuation', 0.0, 1e6, default=0.0)
+                actuation.update(amplitude=amp, frequency_hz=freq, contraction_s=tc, release_s=tr,
+                                 start_delay_s=delay)
+
+        # ---- parameters
+        P = np.zeros(sk.N_PARAMS)
+        G = Ey / (2 * (1 + nu))
+        P[sk.P_PSI] = 2 * Ey * h / (1 - nu ** 2)
+        P[sk.P_PSI2] = 6 * eta_v * h / (1 - nu ** 2)
+        P[sk.P_JS] = h * h / 3
+        P[sk.P_GS] = 2 * h * G * kappa
+        P[sk.P_GV] = 2 * h * eta_v * kappa
+        P[sk.P_NU] = nu
+        P[sk.P_RHO] = rho
+        P[sk.P_AOUT] = A_out
+        P[sk.P_AIN] = A_in
+        P[sk.P_CF] = Cf
+        P[sk.P_CT] = Ct
+        P[sk.P_CD] = Cd
+        P[sk.P_MBODY] = payload + mx
+        P[sk.P_AMP] = amp
+        P[sk.P_FREQ] = freq
+        P[sk.P_TC] = tc
+        P[sk.P_TR] = tr
+        P[sk.P_DT] = dt
+        P[sk.P_ALPHA] = INTEGRATORS[integrator][1]
+        P[sk.P_TOL] = tol
+        P[sk.P_RLIM] = 0.25 * h
+        P[sk.P_QLIM] = 20.0 * max(profile.length_m, rmax0)
+        P[sk.P_MAXIT] = 30
+        P[sk.P_DELAY] = delay
+        P[sk.P_V0] = profile.volume_m3()
+        P[sk.P_VLIM] = 1000.0
+        P[sk.P_PSTAT] = pstat
+        # axis contact: inner faces meet when the midsurface is one half-thickness from the axis;
+        # penalty modulus E over that gap (through-thickness compression of the wall)
+        P[sk.P_VSCALE] = float(ds.min()) / dt
+        P[sk.P_HC] = h
+        P[sk.P_KC] = Ey / h
+
+        model = cls(profile=profile, dt_s=dt, integrator=integrator, flags=flags, P=P, E=E, Nd=Nd,
+                    node_mass=m, node_added_mass=ma, n0=n0, payload_kg=payload, body_added_mass_kg=mx,
+                    actuation=actuation, initial_perturbation_m=pert, initial_velocity_m_s=U0,
+                    duration_s=duration)
+        model.specialise_kernel = spec
+        model.material = dict(youngs_modulus_pa=Ey, viscosity_pa_s=eta_v, poisson_ratio=nu, half_thickness_m=h,
+                              density_kg_m3=rho_s)
+        # ---- refuse what cannot run
+        if integrator == 'verlet':
+            bound = model.stable_step_s(model.initial_state())
+            if dt > bound:
+                raise ModelError(
+                    f'simulation.dt_s: {dt!r} s exceeds the explicit (verlet) stable step {bound:.3g} s of this shell '
+                    f'(E={Ey:g} Pa, eta_v={eta_v:g} Pa s, {ne} elements); allowed: dt_s <= {bound:.3g} s, or '
+                    f'integrator: implicit_midpoint / backward_euler')
+        if flags & sk.F_ROUTINE:
+            limit = min(tc, tr, 1.0 / freq) / 10.0
+            if dt > limit:
+                raise ModelError(f'simulation.dt_s: {dt!r} s does not resolve the actuation routine (contraction '
+                                 f'{tc:g} s, release {tr:g} s); allowed: dt_s <= {limit:.3g} s (a tenth of the '
+                                 f'shortest phase)')
+        return model
+
+    # ------------------------------------------------------------------ protocol
+    @property
+    def n_state(self) -> int:
+        return 6 * self.n_nodes + sk.N_TAIL
+
+    def initial_state(self) -> np.ndarray:
+        n1 = self.n_nodes
+        s = np.zeros(self.n_state)
+        q = s[:3 * n1].reshape(n1, 3)
+        q[:, 0] = self.ref.r0
+        q[:, 1] = self.ref.z0
+        q[:, 2] = self.ref.theta0
+        if self.initial_perturbation_m:
+            xi = self.ref.X / self.ref.X[-1]
+            q[1:-1, 0] += self.initial_perturbation_m * np.sin(math.pi * xi[1:-1])
+        tail = 6 * n1
+        U0 = self.initial_velocity_m_s if self.flags & sk.F_BODY else 0.0
+        s[tail + sk.S_U] = U0
+        v = s[3 * n1:6 * n1].reshape(n1, 3)
+        v[1:-1, 1] = U0   # wall moving with the vehicle (absolute axial velocity)
+        v[0, 1] = U0
+        s[tail + sk.S_VOL] = self.ref.volume_m3()
+        return s
+
+    def _cmd_amp(self, command: Command | None) -> float:
+        if command is None or self.actuation.get('source') != 'command':
+            return 0.0
+        return float(command.cable_force_n)
+
+    def advance(self, state: np.ndarray, time_s: float, n_steps: int, command: Command) -> int:
+        """Advance in place by ``n_steps`` steps of ``dt_s``.
+
+        Implicit schemes: a step whose Newton solve fails (violent collapse, wall contact) is
+        retried as 4, 16, then 64 sub-steps (counted in ``self.substep_events``); only if that fails
+        too, or on a non-finite / out-of-bounds state, SimulationBlowUp is raised with the state at
+        the last good step."""
+        if n_steps <= 0:
+            return 0
+        kern = self._kernel()
+        amp = self._cmd_amp(command)
+        t = float(time_s)
+        remaining = int(n_steps)
+        total = 0
+        while remaining > 0:
+            done, code = kern(self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme)
+            total += done
+            remaining -= done
+            t = float(time_s) + total * self.dt_s
+            if code == sk.OK:
+                break
+            if code == sk.ERR_NEWTON and self.scheme == 1:
+                ok = False
+                for m in (4, 16, 64):
+                    trial = state.copy()
+                    P2 = self.P.copy()
+                    P2[sk.P_DT] = self.dt_s / m
+                    d2, c2 = kern(self.flags, trial, t, m, amp, self.E, self.Nd, P2, self.scheme)
+                    if c2 == sk.OK:
+                        state[:] = trial
+                        ok = True
+                        self.substep_events += 1
+                        break
+                if ok:
+                    total += 1
+                    remaining -= 1
+                    t = float(time_s) + total * self.dt_s
+                    continue
+            raise SimulationBlowUp(f'shell model stopped at t={t:.6g} s: {ERR_TEXT.get(code, code)} '
+                                   f'(state kept at the last good step, dt_s={self.dt_s:g}, '
+                                   f'integrator={self.integrator}){self._diagnose(state)}', t)
+        return total
+
+    def _diagnose(self, state) -> str:
+        """Why a run may have failed, from the last good state: the most compressed meridian
+        element and hoop.  The Kelvin-Voigt law on Green strains (Saint-Venant-Kirchhoff) softens
+        in compression below a stretch of 1/sqrt(3) = 0.577, where an element can fold through
+        itself; without viscosity nothing damps the resulting mesh-scale crumpling."""
+        n1 = self.n_nodes
+        q = state[:3 * n1].reshape(n1, 3)
+        if not np.all(np.isfinite(q)):
+            return ''
+        ds = self.E[:, sk.E_DS]
+        lam = np.hypot(np.diff(q[:, 0]), np.diff(q[:, 1])) / ds
+        tau = 0.5 * (q[:-1, 0] + q[1:, 0]) / self.E[:, sk.E_R0M]
+        e = int(np.argmin(lam))
+        xm = 0.5 * (self.ref.X[e] + self.ref.X[e + 1]) / self.ref.X[-1]
+        msg = (f'; last good state: most compressed meridian element stretch {lam[e]:.3g} at X/L={xm:.2f}, '
+               f'smallest hoop stretch {tau.min():.3g}')
+        if lam[e] < 1 / math.sqrt(3):
+            msg += (' (below 0.577 the Saint-Venant-Kirchhoff membrane law softens and the wall can fold '
+                    'through itself)')
+        if tau.min() < 1 / math.sqrt(3):
+            msg += ' (hoop stretch below 0.577: the hoop force of that law softens, the wall snaps towards the axis)'
+        if not self.flags & sk.F_VISC:
+            msg += '; the wall has no viscosity (nothing damps mesh-scale crumpling)'
+        remedy = 'a smaller actuation amplitude, a smaller dt_s'
+        if not self.flags & sk.F_VISC:
+            remedy += ', or material viscosity > 0'
+        return msg + f'; what would work: {remedy}'
+
+    def _kernel(self):
+        """The compiled advance kernel: generic (runtime flags, default) or flag-specialised.
+
+        ``sk.advance_specialised`` forces ``flags`` to a literal (dead terms are compiled out), but every call
+        through the dispatcher then pays ~8 ms of literal re-dispatch; so it is called once (0 steps)
+        to compile or load the specialisation from the cache, and its entry point is kept."""
+        if not self.specialise_kernel:
+            return sk.advance
+        fn = _KERNELS.get(self.flags)
+        if fn is None:
+            dummy = self.initial_state()
+            sk.advance_specialised(self.flags, dummy, 0.0, 0, 0.0, self.E, self.Nd, self.P, self.scheme)
+            for sig, cres in sk.advance_specialised.overloads.items():
+                lit = getattr(sig[0], 'literal_value', None)
+                if lit == self.flags:
+                    fn = cres.entry_point
+                    break
+            if fn is None:   # pragma: no cover - numba internals changed: fall back to the generic kernel
+                fn = sk.advance
+            _KERNELS[self.flags] = fn
+        return fn
+
+    def routine_command(self, time_s: float) -> Command:
+        """The command the built-in routine applies at ``time_s`` (cable force; muscle: none)."""
+        if self.actuation.get('kind') == 'cable' and self.flags & sk.F_ROUTINE:
+            a, _ = sk.routine(float(time_s), self.P)
+            return Command(cable_force_n=float(self.P[sk.P_AMP] * a))
+        return Command()
+
+    def activation(self, time_s: float) -> float:
+        """Routine activation a(t) in [0, 1] (0 without a routine)."""
+        if not self.flags & sk.F_ROUTINE:
+            return 0.0
+        return float(sk.routine(float(time_s), self.P)[0])
+
+    def _eval(self, state, command=None):
+        t = float(state[6 * self.n_nodes + sk.S_TIME])
+        return sk.evaluate(self.flags, state, t, self._cmd_amp(command), self.E, self.Nd, self.P)
+
+    def observe(self, state: np.ndarray, time_s: float, command: Command) -> Observation:
+        n1 = self.n_nodes
+        tail = 6 * n1
+        st, _, _, _ = self._eval(state, command)
+        T = state[tail:]
+        vol = float(st[sk.T_VOL])
+        rho = self.P[sk.P_RHO]
+        return Observation(
+            time_s=float(time_s), position_m=float(T[sk.S_X]), velocity_m_s=float(T[sk.S_U]),
+            acceleration_m_s2=float(T[sk.S_A]), mantle_radius_m=float(st[sk.T_RMAX]), volume_m3=vol,
+            fluid_mass_kg=float(rho * vol), thrust_n=float(T[sk.S_THR]), added_mass_force_n=0.0,
+            drag_n=float(T[sk.S_BDRAG]), jet_speed_m_s=float(T[sk.S_UJ]), cavity_pressure_pa=float(T[sk.S_P]),
+            pump_flow_m3_s=0.0, valve_opening=1.0)
+
+    def _stored(self, state):
+        n1 = self.n_nodes
+        st, _, _, kint = self._eval(state)
+        v = state[3 * n1:6 * n1].reshape(n1, 3).copy()
+        v[0, 0] = v[0, 2] = 0.0
+        v[-1, :] = 0.0
+        U = float(state[6 * n1 + sk.S_U])
+        k_own = 0.5 * float(np.sum(self.node_mass * (v[:, 0] ** 2 + v[:, 1] ** 2)
+                                   + self.Nd[:, sk.N_MTT] * v[:, 2] ** 2))
+        vn = v[:, 0] * self.n0[:, 0] + v[:, 1] * self.n0[:, 1]
+        k_am = 0.5 * float(np.sum(self.node_added_mass * vn ** 2))
+        k_veh = 0.5 * self.payload_kg * U * U + k_own
+        k_out = 0.5 * self.body_added_mass_kg * U * U + k_am
+        el = float(st[sk.T_EEL])
+        return el + k_veh + k_out + float(kint), el, k_veh, k_out, float(kint)
+
+    def energy_ledger(self, state: np.ndarray) -> dict[str, float]:
+        tot, el, kv, ko, ki = self._stored(state)
+        T = state[6 * self.n_nodes:]
+        led = {
+            'stored_elastic': el, 'stored_kinetic_vehicle': kv, 'stored_kinetic_outer_fluid': ko,
+            'stored_kinetic_internal': ki, 'in_pump_work': float(T[sk.S_IN]), 'in_initial': float(self._initial_energy),
+            'out_jet_kinetic': float(T[sk.S_JET]), 'out_drag': float(T[sk.S_DRAG]),
+            'out_viscous': float(T[sk.S_VISC]), 'out_other': float(T[sk.S_OTHER]),
+        }
+        out = led['out_jet_kinetic'] + led['out_drag'] + led['out_viscous'] + led['out_other']
+        err = tot - led['in_initial'] - led['in_pump_work'] + out
+        led['closure_error'] = float(err)
+        led['closure_relative'] = float(err / max(led['in_initial'] + led['in_pump_work'], 1e-300))
+        return led
+
+    def profile_of(self, state):
+        n1 = self.n_nodes
+        q = state[:3 * n1].reshape(n1, 3)
+        return q[:, 0].copy(), q[:, 1].copy()
+
+    def profile(self, state: np.ndarray):
+        """(r_m, z_m) node arrays of the current meridian (body frame, ring at z = 0)."""
+        return self.profile_of(state)
+
+    def stable_step_s(self, state: np.ndarray) -> float:
+        """Largest stable step of the explicit (verlet) scheme at this state.
+
+        From the generalised eigenvalues of the linearised system at the state: the highest
+        circular frequency omega (stiffness K against the mass M, elastic + geometric) and the
+        highest damping rate c (Kelvin-Voigt and drag, C against M); central differences with
+        damping are stable for dt <= 2/omega (sqrt(1 + xi^2) - xi), xi = c/(2 omega).  A 0.9
+        safety factor covers the stiffening of large deformations."""
+        import scipy.linalg as sla
+        n1 = self.n_nodes
+        t = float(state[6 * n1 + sk.S_TIME])
+        Kb, Cb = sk.stiffness_damping(self.flags, state, t, self.E, self.Nd, self.P)
+        n = 3 * n1
+        free = np.array([not sk.fixed_dof(self.Nd, k) for k in range(n)])
+        K = np.zeros((n, n))
+        C = np.zeros((n, n))
+        bw = sk.BW
+        for i in range(n):
+            for j in range(max(0, i - bw), min(n, i + bw + 1)):
+                K[i, j] = Kb[i, j - i + bw]
+                C[i, j] = Cb[i, j - i + bw]
+        M = np.zeros((n, n))
+        for i in range(n1):
+            M[3 * i, 3 * i] = self.Nd[i, sk.N_MRR]
+            M[3 * i, 3 * i + 1] = M[3 * i + 1, 3 * i] = self.Nd[i, sk.N_MRZ]
+            M[3 * i + 1, 3 * i + 1] = self.Nd[i, sk.N_MZZ]
+            M[3 * i + 2, 3 * i + 2] = self.Nd[i, sk.N_MTT]
+        idx = np.flatnonzero(free)
+        Mf = M[np.ix_(idx, idx)]
+        Kf = -K[np.ix_(idx, idx)]
+        Kf = 0.5 * (Kf + Kf.T)
+        Cf = -C[np.ix_(idx, idx)]
+        Cf = 0.5 * (Cf + Cf.T)
+        w2 = float(np.max(sla.eigh(Kf, Mf, eigvals_only=True)))
+        c = float(np.max(sla.eigh(Cf, Mf, eigvals_only=True))) if np.any(Cf) else 0.0
+        w = math.sqrt(max(w2, 1e-30))
+        xi = max(c, 0.0) / (2 * w)
+        return 0.9 * 2.0 / w * (math.sqrt(1 + xi * xi) - xi)
