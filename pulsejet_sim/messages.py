@@ -11,7 +11,7 @@ from typing import Any, Mapping
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import TwistStamped, WrenchStamped
+from geometry_msgs.msg import Point32, PolygonStamped, TwistStamped, WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -33,6 +33,8 @@ TOPIC_CMD_CABLE_FORCE = 'pulsejet/cmd/cable_force'
 # The command the simulator actually held from the stamped simulation time on (after validation):
 # what re-simulation replays step for step.
 TOPIC_APPLIED_COMMAND = 'pulsejet/applied_command'
+# The mantle's meridian in the body frame: x = axial position (m, forward +), y = radius (m).
+TOPIC_MANTLE_PROFILE = 'pulsejet/mantle_profile'
 APPLIED_COMMAND_NAMES = ('pump_flow_m3_s', 'valve_opening', 'cable_force_n')
 
 # topic -> ROS type name, as in docs/ARCHITECTURE.md
@@ -48,6 +50,7 @@ TOPIC_TYPES: dict[str, str] = {
     TOPIC_CMD_VALVE: 'std_msgs/msg/Float64',
     TOPIC_CMD_CABLE_FORCE: 'std_msgs/msg/Float64',
     TOPIC_APPLIED_COMMAND: 'sensor_msgs/msg/JointState',
+    TOPIC_MANTLE_PROFILE: 'geometry_msgs/msg/PolygonStamped',
 }
 STATE_TOPICS = (TOPIC_MANTLE_RADIUS, TOPIC_VOLUME, TOPIC_VELOCITY, TOPIC_THRUST, TOPIC_FLUID_MASS, TOPIC_CLOCK)
 COMMAND_TOPICS = (TOPIC_CMD_PUMP_FLOW, TOPIC_CMD_VALVE, TOPIC_CMD_CABLE_FORCE)
@@ -62,7 +65,8 @@ def message_class(topic: str) -> type:
     classes = {'std_msgs/msg/Float64': Float64, 'geometry_msgs/msg/TwistStamped': TwistStamped,
                'geometry_msgs/msg/WrenchStamped': WrenchStamped, 'rosgraph_msgs/msg/Clock': Clock,
                'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray,
-               'sensor_msgs/msg/JointState': JointState}
+               'sensor_msgs/msg/JointState': JointState,
+               'geometry_msgs/msg/PolygonStamped': PolygonStamped}
     try:
         return classes[TOPIC_TYPES[topic]]
     except KeyError:
@@ -175,3 +179,13 @@ def command_from_applied(msg: Any) -> tuple[float, Command]:
     values = dict(zip(msg.name, msg.position))
     time_s = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
     return time_s, Command(values['pump_flow_m3_s'], values['valve_opening'], values['cable_force_n'])
+
+
+def profile_message(r_m, z_m, time_s: float, frame_id: str = FRAME_ID) -> PolygonStamped:
+    """Mantle meridian (node radii r_m and axial positions z_m, m) as a PolygonStamped in the
+    body's x (axial, forward +) / y (radial) plane."""
+    msg = PolygonStamped()
+    msg.header.stamp = stamp(time_s)
+    msg.header.frame_id = frame_id
+    msg.polygon.points = [Point32(x=float(z), y=float(r), z=0.0) for r, z in zip(r_m, z_m)]
+    return msg

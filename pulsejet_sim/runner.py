@@ -95,6 +95,9 @@ def _record(drive: Drive, out: Path) -> RunResult:
         ns = messages.stamp_ns(obs.time_s)
         for topic, msg in messages.observation_messages(obs):
             writer.write_message(topic, msg, ns)
+        profile = sim.profile()
+        if profile is not None:
+            writer.write_message(messages.TOPIC_MANTLE_PROFILE, messages.profile_message(*profile, obs.time_s), ns)
         if ledger:
             writer.write_message(messages.TOPIC_ENERGY_LEDGER, messages.ledger_message(sim.energy_ledger(), obs.time_s), ns)
 

@@ -63,8 +63,13 @@ class Scene:
         return getattr(self.model, 'initial_command', Command())
 
 
-def load_scene(name_or_path: str | os.PathLike = DEFAULT_SCENE, overrides: dict | None = None) -> Scene:
-    """Read, validate and compile a scene. `overrides` is merged section by section (tests, sweeps)."""
+def load_scene(name_or_path: str | os.PathLike = DEFAULT_SCENE, overrides: dict | None = None,
+               command_driven: bool = False) -> Scene:
+    """Read, validate and compile a scene. `overrides` is merged section by section (tests, sweeps).
+
+    command_driven=True is how the live nodes load a scene: actuation the model would otherwise
+    drive itself from its built-in routine (the shell's cable) comes from commands instead, and
+    `scene.routine` describes the same routine for controller_node to send."""
     path = resolve_scene_path(name_or_path)
     try:
         data = yaml.safe_load(path.read_text())
@@ -74,7 +79,23 @@ def load_scene(name_or_path: str | os.PathLike = DEFAULT_SCENE, overrides: dict 
         raise SceneError(f'scene file {path}: {type(data).__name__} at top level; allowed: a mapping with '
                          f'keys model, simulation, geometry, material, ...')
     data = merge(data, overrides or {})
+    if command_driven:
+        data = command_driven_data(data)
     return scene_from_dict(data, name=str(data.pop('name', path.stem)), path=path)
+
+
+def command_driven_data(data: dict[str, Any]) -> dict[str, Any]:
+    """A shell scene whose cable follows its built-in routine becomes one whose cable follows
+    commands, with a `routine:` block of the same shape for the controller (pulsejet_ctrl.CableRoutine)."""
+    actuation = data.get('actuation')
+    if data.get('model') != 'shell' or not isinstance(actuation, dict) or actuation.get('kind') != 'cable' \
+            or actuation.get('source', 'routine') != 'routine' or 'routine' in data:
+        return data
+    routine = {'kind': 'cable', 'amplitude_n': actuation.get('amplitude', 0.0)}
+    for key in ('frequency_hz', 'contraction_s', 'release_s', 'start_delay_s'):
+        if key in actuation:
+            routine[key] = actuation[key]
+    return dict(data, actuation=dict(actuation, source='command'), routine=routine)
 
 
 def scene_from_dict(data: dict[str, Any], name: str = 'scene', path: Path | None = None) -> Scene:
