@@ -63,13 +63,8 @@ class Scene:
         return getattr(self.model, 'initial_command', Command())
 
 
-def load_scene(name_or_path: str | os.PathLike = DEFAULT_SCENE, overrides: dict | None = None,
-               command_driven: bool = False) -> Scene:
-    """Read, validate and compile a scene. `overrides` is merged section by section (tests, sweeps).
-
-    command_driven=True is how the live nodes load a scene: actuation the model would otherwise
-    drive itself from its built-in routine (the shell's cable) comes from commands instead, and
-    `scene.routine` describes the same routine for controller_node to send."""
+def load_scene_data(name_or_path: str | os.PathLike) -> tuple[dict[str, Any], Path]:
+    """The raw mapping of a scene file (not validated yet) and its path."""
     path = resolve_scene_path(name_or_path)
     try:
         data = yaml.safe_load(path.read_text())
@@ -78,6 +73,19 @@ def load_scene(name_or_path: str | os.PathLike = DEFAULT_SCENE, overrides: dict 
     if not isinstance(data, dict):
         raise SceneError(f'scene file {path}: {type(data).__name__} at top level; allowed: a mapping with '
                          f'keys model, simulation, geometry, material, ...')
+    return data, path
+
+
+def load_scene(name_or_path: str | os.PathLike = DEFAULT_SCENE, overrides: dict | None = None,
+               command_driven: bool = False, replace: tuple[str, ...] = ()) -> Scene:
+    """Read, validate and compile a scene. `overrides` is merged section by section (tests, sweeps);
+    the sections named in `replace` are replaced by the override's instead.
+
+    command_driven=True is how the live nodes load a scene: actuation the model would otherwise
+    drive itself from its built-in routine (the shell's cable) comes from commands instead, and
+    `scene.routine` describes the same routine for controller_node to send."""
+    data, path = load_scene_data(name_or_path)
+    data = {k: v for k, v in data.items() if k not in replace}
     data = merge(data, overrides or {})
     if command_driven:
         data = command_driven_data(data)

@@ -21,7 +21,9 @@ Sweep file (YAML)::
             consistent: {options: {energy_model: consistent}}
             paper: {options: {energy_model: paper}}
 
-An axis value may also hold `scene: OTHER` to switch the base scene (e.g. cone vs ellipsoid).
+An axis value may also hold `scene: OTHER` to switch the base scene (e.g. cone vs ellipsoid), and a
+study may list `replace: [section, ...]`: those sections of the base scene are replaced whole by
+the overrides (e.g. a muscle actuation block instead of a cable one) rather than merged into.
 """
 from __future__ import annotations
 
@@ -55,6 +57,7 @@ class RunSpec:
     scene: str
     overrides: Mapping[str, Any]
     duration_s: float
+    replace: tuple[str, ...] = ()             # base-scene sections the overrides replace whole
 
     @property
     def name(self) -> str:
@@ -84,7 +87,7 @@ def run_one(spec: RunSpec) -> RunRow:
     start = time.perf_counter()
     row = RunRow(name=spec.name, study=spec.study, labels=dict(spec.labels))
     try:
-        drive = Drive(load_scene(spec.scene, dict(spec.overrides)), spec.duration_s)
+        drive = Drive(load_scene(spec.scene, dict(spec.overrides), replace=spec.replace), spec.duration_s)
     except ValueError as err:
         row.fault = f'refused: {err}'
         return row
@@ -124,6 +127,8 @@ def load_sweep(path: str | os.PathLike) -> tuple[dict, list[RunSpec]]:
     if not isinstance(data, dict) or 'studies' not in data:
         raise SweepError(f'{p}: top level must be a mapping with key studies (and name, duration_s, metric)')
     unknown = set(data) - {'name', 'description', 'duration_s', 'metric', 'studies'}
+    if not isinstance(data['studies'], dict):
+        raise SweepError(f'{p}: studies: allowed: a mapping of study name -> {{base, overrides, replace, axes}}')
     if unknown:
         raise SweepError(f'{p}: {sorted(unknown)[0]}: unknown key; allowed: name, description, duration_s, metric, studies')
     duration = data.get('duration_s', 5.0)
@@ -146,7 +151,8 @@ def load_sweep(path: str | os.PathLike) -> tuple[dict, list[RunSpec]]:
                 scene = values.pop('scene', scene)
                 overrides = merge(overrides, values)
             runs.append(RunSpec(study=str(study), labels=tuple((a, str(lbl)) for a, lbl, _ in combo),
-                                scene=str(scene), overrides=overrides, duration_s=float(duration)))
+                                scene=str(scene), overrides=overrides, duration_s=float(duration),
+                                replace=tuple(body.get('replace') or ())))
     meta = {'name': data.get('name', p.stem), 'metric': metric, 'duration_s': float(duration), 'path': str(p)}
     return meta, runs
 
@@ -237,7 +243,7 @@ def main_sweep(argv: list[str]) -> int:
         print(f'pulsejet sweep: --workers {args.workers} rejected; allowed: 1 or more', file=sys.stderr)
         return 2
     if args.duration is not None:
-        runs = [RunSpec(r.study, r.labels, r.scene, r.overrides, args.duration) for r in runs]
+        runs = [RunSpec(r.study, r.labels, r.scene, r.overrides, args.duration, r.replace) for r in runs]
     print(f'{meta["name"]}: {len(runs)} runs of {runs[0].duration_s if runs else 0:g} s on '
           f'{args.workers or os.cpu_count()} workers')
     rows = run_sweep(runs, workers=args.workers)
