@@ -1,26 +1,34 @@
-"""ROS 2 node around `PumpValveRoutine`: reads simulation time from /clock, publishes pump/valve commands.
+"""ROS 2 node around a routine of `pulsejet_ctrl.routines`: reads simulation time from /clock,
+publishes pump/valve/cable commands.
 
-A thin adapter: the state machine lives in `pulsejet_ctrl.routines`. The routine is evaluated at
-`rate_hz` in *simulation* time (on /clock messages), so the command sequence does not depend on
-the simulator's real-time factor beyond the clock's own resolution.
+A thin adapter: the state machine lives in `pulsejet_ctrl.routines` (PumpValveRoutine, or
+CableRoutine for a shell scene whose cable follows a routine: the scene is loaded command-driven,
+so the simulator takes the cable force from here). The routine is evaluated at `rate_hz` in
+*simulation* time (on /clock messages), so the command sequence does not depend on the
+simulator's real-time factor beyond the clock's own resolution; when the time goes back (a
+simulator reset) the routine restarts.
 
 Parameters
-  scene             (string, read-only)  scene whose `routine:` block gives the defaults; default pump_cycle
-  rate_hz           (double > 0)         command rate in simulated time; default 50
-  inflate_s, target_volume_m3, pump_flow_m3_s, hold_s, jet_s, valve_opening, start_delay_s (double),
-  cycles (int)                           routine fields, default from the scene, each overridable
+  scene             (string, read-only)  scene whose `routine:` block gives the kind and defaults; default pump_cycle
+  rate_hz           (double, live)       command rate in simulated time, [0.001, 10000] Hz; default 50
+  routine fields    (read-only)          pump_valve: inflate_s, target_volume_m3, pump_flow_m3_s, hold_s,
+                                         jet_s, valve_opening, start_delay_s (double), cycles (int);
+                                         cable: amplitude_n, frequency_hz, contraction_s, release_s,
+                                         start_delay_s. Default from the scene, each overridable at
+                                         start-up; ranges from the routine's spec (`ros2 param describe`)
+Every parameter has a descriptor (description, range); values are checked at declaration and on
+live changes, a rejection names the value and the allowed range.
 Subscribes /clock (rosgraph_msgs/Clock), pulsejet/volume (std_msgs/Float64, m^3).
-Publishes pulsejet/cmd/pump_flow (m^3/s), pulsejet/cmd/valve (0..1), pulsejet/cmd/cable_force (N, 0).
+Publishes pulsejet/cmd/pump_flow (m^3/s), pulsejet/cmd/valve (0..1), pulsejet/cmd/cable_force (N).
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import signal
 import sys
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -28,16 +36,28 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
+from pulsejet_ctrl import routines as _routines
+from pulsejet_sim.models.base import Command
+from pulsejet_sim.sim_node import ParamSpec
+
+#: routine field -> description (ranges and defaults come from the routine's spec)
 ROUTINE_FIELDS = {
-    'inflate_s': (float, 's of pump inflation per cycle'),
-    'target_volume_m3': (float, 'inflate until this cavity volume instead (0 = use inflate_s)'),
-    'pump_flow_m3_s': (float, 'pump flow while inflating, m^3/s'),
-    'hold_s': (float, 's with pump off and valve shut before the jet'),
-    'jet_s': (float, 's with the valve open (jetting)'),
-    'valve_opening': (float, 'valve opening while jetting, 0..1'),
-    'cycles': (int, 'number of cycles (0 = forever)'),
-    'start_delay_s': (float, 's of simulated time before the first cycle'),
+    'inflate_s': 's of pump inflation per cycle',
+    'target_volume_m3': 'inflate until this cavity volume instead (0 = use inflate_s), m^3',
+    'pump_flow_m3_s': 'pump flow while inflating, m^3/s',
+    'hold_s': 's with pump off and valve shut before the jet',
+    'jet_s': 's with the valve open (jetting)',
+    'valve_opening': 'valve opening while jetting, 0..1',
+    'cycles': 'number of cycles (0 = forever)',
+    'start_delay_s': 's of simulated time before the first cycle',
+    'amplitude_n': 'peak cable pull, N',
+    'frequency_hz': 'cable pulls per second of simulated time, Hz',
+    'contraction_s': 's of the half-cosine rise of the pull',
+    'release_s': 's of the half-cosine release of the pull',
 }
+INTEGER_FIELDS = ('cycles',)
+#: routine kind -> field -> pulsejet_sim.schema.Number (default, range)
+ROUTINE_SPECS = {'pump_valve': _routines.PUMP_VALVE_SPEC, 'cable': _routines.CABLE_SPEC}
 
 
 def message_pairs(messages):
@@ -52,40 +72,46 @@ class ControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('controller_node', **kwargs)
-        from pulsejet_ctrl.routines import PumpValveRoutine
+        from pulsejet_ctrl import routines
         from pulsejet_sim import messages
         from pulsejet_sim.scene import load_scene
         self._messages = messages
-        self._routine_cls = PumpValveRoutine
 
-        self.declare_parameter('scene', 'pump_cycle', ParameterDescriptor(
-            description='scene whose routine block gives the default parameters', read_only=True))
-        self.declare_parameter('rate_hz', 50.0, ParameterDescriptor(
-            description='command rate in simulated time (Hz, > 0)', read_only=True, dynamic_typing=True))
-        scene = load_scene(self.get_parameter('scene').value)
+        self._specs = {}
+        self._ready = False
+        # every value is checked here, at declaration (command-line overrides) and on live changes
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._declare(ParamSpec('scene', 'pump_cycle', 'scene whose routine block gives the default parameters',
+                                read_only=True, allowed='a scene name under config/ or a YAML file path'))
+        self._declare(ParamSpec('rate_hz', 50.0, 'command rate in simulated time (Hz); live', 1e-3, 10000.0))
+        # command_driven: a shell scene's built-in cable routine becomes commands sent from here
+        scene = load_scene(self.get_parameter('scene').value, command_driven=True)
         scene_routine = dict(getattr(scene, 'routine', None) or {})
         if not scene_routine:
             self.get_logger().warning(f'scene {scene.name!r} has no routine block: the routine defaults apply')
-        defaults = {f.name: f.default for f in dataclasses.fields(PumpValveRoutine)}
-        config = dict(scene_routine)
-        for name, (kind, description) in ROUTINE_FIELDS.items():
-            default = scene_routine.get(name, defaults.get(name))
-            # numbers accept ints and floats (`inflate_s:=2`); the routine checks the values
-            descriptor = ParameterDescriptor(description=description, read_only=True, dynamic_typing=True)
-            value = self.declare_parameter(name, kind(default), descriptor).value
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                    (kind is int and not float(value).is_integer()):
-                allowed = 'a whole number' if kind is int else 'a number'
-                raise ValueError(f'parameter {name}={value!r} rejected; allowed: {allowed} ({description})')
-            config[name] = kind(value)
+        kind = scene_routine.get('kind', 'pump_valve')
+        if kind not in ROUTINE_SPECS:
+            raise ValueError(f'scene {scene.name!r}: routine.kind={kind!r}; allowed: one of {", ".join(ROUTINE_SPECS)}')
+        self._routine_cls = routines.ROUTINES[kind]
+        config = dict(scene_routine, kind=kind)
+        for name, number in ROUTINE_SPECS[kind].items():
+            if name == 'kind':
+                continue
+            kind_of = int if name in INTEGER_FIELDS else float
+            description = ROUTINE_FIELDS.get(name, f'{name} ({number.unit})')
+            if number.low_open:
+                description += f' (> {number.low:g})'
+            low, high = number.low, number.high
+            default = scene_routine.get(name, number.default)
+            # numbers accept ints and floats (`inflate_s:=2`); the routine checks the values too.
+            # Read-only: they define the routine's state machine (restart the node to change them).
+            spec = ParamSpec(name, kind_of(default), description, low, high, read_only=True)
+            config[name] = kind_of(self._declare(spec))
         self.config = config
-        self.routine = PumpValveRoutine.from_config(dict(config))
-
-        rate = self.get_parameter('rate_hz').value
-        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate) or rate <= 0:
-            raise ValueError(f'parameter rate_hz={rate!r} rejected; allowed: a finite number > 0')
-        self.rate_hz = float(rate)
+        self.routine = self._routine_cls.from_config(dict(config))
+        self.rate_hz = float(self.get_parameter('rate_hz').value)
         self.period_s = 1.0 / self.rate_hz
+        self._ready = True
 
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self._qos = qos
@@ -99,6 +125,28 @@ class ControllerNode(Node):
         self.create_subscription(Clock, '/clock', self._on_clock, qos)
         self.create_subscription(Float64, 'pulsejet/volume', self._on_volume, qos)
         self.get_logger().info(f'routine {config} at {self.rate_hz:g} Hz of simulated time; waiting for /clock')
+
+    def _declare(self, spec: ParamSpec):
+        self._specs[spec.name] = spec
+        self.declare_parameter(spec.name, spec.default, spec.descriptor())
+        return spec.check(self.get_parameter(spec.name).value)
+
+    def _on_set_parameters(self, params):
+        checked = {}
+        for param in params:
+            spec = self._specs.get(param.name)
+            if spec is None:
+                continue
+            try:
+                checked[param.name] = spec.check(param.value)
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        if self._ready and 'rate_hz' in checked:
+            self.rate_hz = checked['rate_hz']
+            self.period_s = 1.0 / self.rate_hz
+            self.next_command_s = None     # next /clock sample sends and restarts the grid
+            self.get_logger().info(f'command rate set to {self.rate_hz:g} Hz of simulated time')
+        return SetParametersResult(successful=True)
 
     def _on_volume(self, msg: Float64):
         if math.isfinite(msg.data):
@@ -123,7 +171,6 @@ class ControllerNode(Node):
 
     def _send(self, t):
         cmd = self.routine.command(t, self.volume_m3)
-        cmd = type(cmd)(cmd.pump_flow_m3_s, cmd.valve_opening, 0.0) if cmd.cable_force_n != 0.0 else cmd
         for topic, msg in message_pairs(self._messages.command_messages(cmd)):
             pub = self._pubs.get(topic)
             if pub is None:

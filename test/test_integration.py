@@ -24,11 +24,6 @@ DURATION_S = 6.0          # pump_cycle: inflate 2 s, hold 0.2 s, jet 1.8 s -> 1.
 REAL_TIME_FACTOR = 3.0
 
 
-def ros_float(x: float) -> str:
-    s = repr(float(x))
-    return format(float(x), '.12f') if ('e' in s or 'n' in s) else s
-
-
 @pytest.fixture
 def ros_domain(monkeypatch):
     domain = 1 + (os.getpid() + DOMAIN_OFFSET) % 100
@@ -38,26 +33,6 @@ def ros_domain(monkeypatch):
     monkeypatch.setenv('RCUTILS_COLORIZED_OUTPUT', '0')
     monkeypatch.setenv('PYTHONUNBUFFERED', '1')
     return domain
-
-
-def start(module: str, params: dict, log: Path) -> tuple[subprocess.Popen, object]:
-    args = [sys.executable, '-m', module, '--ros-args']
-    for k, v in params.items():
-        args += ['-p', f'{k}:={ros_float(v) if isinstance(v, float) else v}']
-    f = open(log, 'wb')
-    return subprocess.Popen(args, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                            env=dict(os.environ)), f
-
-
-def stop(proc: subprocess.Popen, timeout=10.0) -> int:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-    return proc.returncode
 
 
 def read_bag(path: Path) -> dict[str, list[tuple[float, object]]]:
@@ -81,46 +56,33 @@ def values_of(entries) -> list[float]:
 
 
 @pytest.mark.timeout(150)
-def test_sim_and_controller_swim_recorded_to_mcap(ros_domain, tmp_path):
-    from rclpy.executors import SingleThreadedExecutor
-
+def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
+    from pulsejet_sim.harness import SimHarness
     from pulsejet_sim.recorder import Recorder
 
     mcap = tmp_path / 'run.mcap'
-    procs, files = {}, []
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=ros_domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    node = rclpy.create_node('integration_recorder', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    recorder = Recorder(node, mcap, None)
     t_start = time.monotonic()
-    try:
-        procs['controller'], f = start('pulsejet_ctrl.controller_node', {'scene': 'pump_cycle'},
-                                       tmp_path / 'controller.log')
-        files.append(f)
-        procs['sim'], f = start('pulsejet_sim.sim_node', {
-            'scene': 'pump_cycle', 'duration_s': DURATION_S, 'real_time_factor': REAL_TIME_FACTOR,
-            'wait_for_subscribers': 2, 'wait_timeout_s': 30.0}, tmp_path / 'sim.log')
-        files.append(f)
-        deadline = time.monotonic() + 100
-        while procs['sim'].poll() is None and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-            assert procs['controller'].poll() is None, (tmp_path / 'controller.log').read_text()
-        end = time.monotonic() + 0.5
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
-    finally:
-        codes = {name: stop(p) for name, p in procs.items()}
-        for f in files:
-            f.close()
-        recorder.close()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+    # start paused: the recorder subscribes, then the run starts from t=0 with everything matched
+    with SimHarness(scene='pump_cycle', controller=True, log_dir=tmp_path,
+                    parameters={'duration_s': DURATION_S, 'real_time_factor': REAL_TIME_FACTOR,
+                                'start_paused': True}) as h:
+        recorder = Recorder(h.node, mcap, None)
+        try:
+            # every topic but the mantle profile (a shell-model topic; pump_cycle is lumped)
+            h.spin_until(lambda: all(sub.get_publisher_count() > 0 for sub in recorder._subscriptions
+                                     if not sub.topic_name.endswith('mantle_profile')), 30.0,
+                         'the recorder to match every topic')
+            assert h.resume().success
+            assert h.wait_for_exit('sim_node', timeout_s=100) == 0, h.output()[-3000:]
+            h.spin(0.5)
+            assert h.processes['controller_node'].alive(), h.output('controller_node')[-3000:]
+        finally:
+            recorder.close()
+        sim_log = h.output()
+    codes = h.exit_codes
     wall = time.monotonic() - t_start
-    sim_log = (tmp_path / 'sim.log').read_text()
-    assert codes['sim'] == 0, f'sim_node exit {codes["sim"]}:\n{sim_log[-3000:]}'
-    assert codes['controller'] == 0, (tmp_path / 'controller.log').read_text()[-3000:]
+    assert codes['sim_node'] == 0, f'sim_node exit {codes["sim_node"]}:\n{sim_log[-3000:]}'
+    assert codes['controller_node'] == 0, (tmp_path / 'controller_node.log').read_text()[-3000:]
     assert 'ERROR' not in sim_log, sim_log[-3000:]
     print(f'wall time {wall:.1f} s for {DURATION_S} s simulated at rtf {REAL_TIME_FACTOR}')
 

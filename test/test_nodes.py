@@ -209,47 +209,42 @@ def volume_series(probe, since_wall):
 
 
 @pytest.mark.timeout(120)
-def test_bad_commands_rejected_good_ones_applied(start_node, probe):
+def test_bad_commands_rejected_good_ones_applied(tmp_path):
+    from pulsejet_sim.harness import SimHarness
     from pulsejet_sim.models.base import Command
-    sim = start_node(real_time_factor=1.0, publish_rate_hz=50.0)
-    probe.wait_for_subscribers()
-    wait_running(probe, sim, 0.3)
-    # idle (pump off, valve open): the cavity volume is at rest
-    probe.spin_for(0.5)
-    rest = volume_series(probe, time.monotonic() - 0.4)
-    v_rest = rest[-1]
+    with SimHarness(parameters={'real_time_factor': 1.0, 'publish_rate_hz': 50.0}, log_dir=tmp_path) as h:
+        h.wait_for(lambda s: s.time_s >= 0.3, 60.0)
+        # idle (the scene's initial command: pump off): the cavity volume is at rest
+        h.spin(0.5)
+        v_rest = h.latest.volume_m3
 
-    bad = [('pump_flow', float('nan'), 'nan'), ('pump_flow', float('inf'), 'inf'), ('pump_flow', -1.0, '-1.0'),
-           ('valve', 2.0, '2.0'), ('valve', float('nan'), 'nan'), ('cable_force', -5.0, '-5.0')]
-    t_bad = time.monotonic()
-    for name, value, _ in bad:
-        probe.send(name, value)
-        probe.spin_for(0.1)
-    probe.spin_for(1.0)
-    assert sim.alive(), f'sim_node died on a bad command:\n{sim.output()[-3000:]}'
-    out = sim.output()
-    for name, _, text in bad:
-        field = {'pump_flow': 'pump_flow_m3_s', 'valve': 'valve_opening', 'cable_force': 'cable_force_n'}[name]
-        low, high = Command.LIMITS[field]
-        expected = f'{field}={text}'
-        assert any(expected in line and f'[{low}, {high}]' in line and 'WARN' in line
-                   for line in out.splitlines()), f'no warning naming {expected} and [{low}, {high}]:\n{out[-3000:]}'
-    after = volume_series(probe, t_bad)
-    assert after and all(math.isfinite(v) for v in after), 'non-finite volume after bad commands'
-    assert max(abs(v - v_rest) for v in after) <= 0.01 * abs(v_rest) + 1e-12, \
-        f'state changed after rejected commands: rest {v_rest}, after {min(after)}..{max(after)}'
-    assert probe.clock_s() > 0.5
+        bad = [('pump_flow_m3_s', float('nan'), 'nan'), ('pump_flow_m3_s', float('inf'), 'inf'),
+               ('pump_flow_m3_s', -1.0, '-1.0'), ('valve_opening', 2.0, '2.0'),
+               ('valve_opening', float('nan'), 'nan'), ('cable_force_n', -5.0, '-5.0')]
+        t_bad = time.monotonic()
+        for field, value, _ in bad:
+            h.send(**{field: value})
+            h.spin(0.1)
+        h.spin(1.0)
+        out = h.output()
+        for field, _, text in bad:
+            low, high = Command.LIMITS[field]
+            expected = f'{field}={text}'
+            assert any(expected in line and f'[{low}, {high}]' in line and 'WARN' in line
+                       for line in out.splitlines()), f'no warning naming {expected} and [{low}, {high}]:\n{out[-3000:]}'
+        after = [s.volume_m3 for s in h.states if s.wall_s >= t_bad]
+        assert after and all(math.isfinite(v) for v in after), 'non-finite volume after bad commands'
+        assert max(abs(v - v_rest) for v in after) <= 0.01 * abs(v_rest) + 1e-12, \
+            f'state changed after rejected commands: rest {v_rest}, after {min(after)}..{max(after)}'
+        assert h.latest.time_s > 0.5
 
-    # a valid command takes effect: valve shut + pump on inflates the cavity
-    low, high = Command.LIMITS['pump_flow_m3_s']
-    flow = min(high, max(1e-4, abs(v_rest) * 0.5))   # about half the rest volume per second
-    probe.send('valve', 0.0)
-    probe.send('pump_flow', flow)
-    t_good = time.monotonic()
-    probe.spin_until(lambda: volume_series(probe, t_good) and max(volume_series(probe, t_good)) > v_rest * 1.05,
-                     timeout=10.0, what=f'the volume to rise above {v_rest * 1.05:.3e} m^3 with pump {flow:.3e} m^3/s')
-    assert sim.alive()
-    assert 'WARN' not in sim.output()[len(out):], sim.output()[len(out):]
+        # a valid command takes effect: valve shut + pump on inflates the cavity
+        low, high = Command.LIMITS['pump_flow_m3_s']
+        flow = min(high, max(1e-4, abs(v_rest) * 0.5))   # about half the rest volume per second
+        h.send(valve_opening=0.0, pump_flow_m3_s=flow)
+        h.wait_for(lambda s: s.volume_m3 > v_rest * 1.05, 10.0,
+                   f'the volume to rise above {v_rest * 1.05:.3e} m^3 with pump {flow:.3e} m^3/s')
+        assert 'WARN' not in h.output()[len(out):], h.output()[len(out):]
 
 
 @pytest.mark.timeout(120)
@@ -282,44 +277,37 @@ def test_rejects_invalid_parameter(start_node):
 
 
 @pytest.mark.timeout(120)
-def test_blow_up_stops_stepping_without_nan(start_node, probe):
+def test_blow_up_stops_stepping_without_nan(tmp_path):
     """Pumping at full flow against a shut valve over-inflates the shell until the model stops:
     the node logs the cause, stops stepping and publishing, never publishes NaN and stays up."""
+    from pulsejet_sim.harness import SimHarness
     from pulsejet_sim.models.base import Command
-    sim = start_node(real_time_factor=2.0, publish_rate_hz=50.0)
-    probe.wait_for_subscribers()
-    wait_running(probe, sim, 0.1)
-    probe.send('valve', 0.0)
-    probe.send('pump_flow', Command.LIMITS['pump_flow_m3_s'][1])
-    probe.spin_until(lambda: 'physics blew up' in sim.output() or not sim.alive(), timeout=30.0,
-                     what='the physics to blow up')
-    probe.spin_for(0.5)
-    t_stop = probe.clock_s()
-    n_clock = len(probe.received['/clock'])
-    probe.spin_for(1.0)
-    assert sim.alive(), f'sim_node died on a blow-up:\n{sim.output()[-3000:]}'
-    out = sim.output()
-    line = next(l for l in out.splitlines() if 'physics blew up' in l)
-    assert 'ERROR' in line and 'semi-axis' in line, line
-    assert len(probe.received['/clock']) == n_clock and probe.clock_s() == t_stop, 'still publishing after a blow-up'
-    for topic in ('pulsejet/volume', 'pulsejet/mantle_radius', 'pulsejet/fluid_mass'):
-        assert all(math.isfinite(m.data) for _, m in probe.received[topic]), topic
-    assert all(math.isfinite(m.twist.linear.x) for _, m in probe.received['pulsejet/velocity'])
-    assert all(math.isfinite(m.wrench.force.x) for _, m in probe.received['pulsejet/thrust'])
-    assert sim.stop() == 1   # the run failed: non-zero exit even when stopped by a signal
+    with SimHarness(parameters={'real_time_factor': 2.0, 'publish_rate_hz': 50.0}, log_dir=tmp_path) as h:
+        h.wait_for(lambda s: s.time_s >= 0.1, 60.0)
+        h.send(valve_opening=0.0, pump_flow_m3_s=Command.LIMITS['pump_flow_m3_s'][1])
+        h.spin_until(lambda: 'physics blew up' in h.output(), 30.0, 'the physics to blow up')
+        h.spin(0.5)
+        t_stop, n_clock = h.latest.time_s, len(h.states)
+        h.spin(1.0)
+        assert h.processes['sim_node'].alive(), f'sim_node died on a blow-up:\n{h.output()[-3000:]}'
+        line = next(l for l in h.output().splitlines() if 'physics blew up' in l)
+        assert 'ERROR' in line and 'semi-axis' in line, line
+        assert len(h.states) == n_clock and h.latest.time_s == t_stop, 'still publishing after a blow-up'
+        for s in h.states:
+            assert all(math.isfinite(v) for v in (s.volume_m3, s.mantle_radius_m, s.fluid_mass_kg,
+                                                  s.velocity_m_s, s.thrust_n)), s
+    assert h.exit_codes['sim_node'] == 1   # the run failed: non-zero exit even when stopped by a signal
 
 
 @pytest.mark.timeout(120)
-def test_blow_up_with_duration_exits_non_zero(start_node, probe):
+def test_blow_up_with_duration_exits_non_zero(tmp_path):
+    from pulsejet_sim.harness import SimHarness
     from pulsejet_sim.models.base import Command
-    sim = start_node(real_time_factor=2.0, duration_s=60.0)
-    probe.wait_for_subscribers()
-    wait_running(probe, sim, 0.1)
-    probe.send('valve', 0.0)
-    probe.send('pump_flow', Command.LIMITS['pump_flow_m3_s'][1])
-    probe.spin_until(lambda: not sim.alive(), timeout=30.0, what='sim_node to exit after the blow-up')
-    assert sim.proc.returncode == 1, sim.output()[-3000:]
-    assert 'physics blew up' in sim.output()
+    with SimHarness(parameters={'real_time_factor': 2.0, 'duration_s': 60.0}, log_dir=tmp_path) as h:
+        h.wait_for(lambda s: s.time_s >= 0.1, 60.0)
+        h.send(valve_opening=0.0, pump_flow_m3_s=Command.LIMITS['pump_flow_m3_s'][1])
+        assert h.wait_for_exit('sim_node', timeout_s=30.0) == 1, h.output()[-3000:]
+        assert 'physics blew up' in h.output()
 
 
 @pytest.mark.timeout(120)
