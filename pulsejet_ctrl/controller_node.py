@@ -9,7 +9,7 @@ simulator's real-time factor beyond the clock's own resolution; when the time go
 simulator reset) the routine restarts.
 
 Parameters
-  scene             (string, read-only)  scene whose `routine:` block gives the kind and defaults; default pump_cycle
+  scene             (string, read-only)  scene whose `routine:` block gives the kind and defaults; default shell_robot
   rate_hz           (double, live)       command rate in simulated time, [0.001, 10000] Hz; default 50
   routine fields    (read-only)          pump_valve: inflate_s, target_volume_m3, pump_flow_m3_s, hold_s,
                                          jet_s, valve_opening, start_delay_s (double), cycles (int);
@@ -39,6 +39,7 @@ from std_msgs.msg import Float64
 from pulsejet_ctrl import routines as _routines
 from pulsejet_sim.models.base import Command
 from pulsejet_sim.sim_node import ParamSpec
+from pulsejet_sim.scene import DEFAULT_SCENE
 
 #: routine field -> description (ranges and defaults come from the routine's spec)
 ROUTINE_FIELDS = {
@@ -81,7 +82,7 @@ class ControllerNode(Node):
         self._ready = False
         # every value is checked here, at declaration (command-line overrides) and on live changes
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._declare(ParamSpec('scene', 'pump_cycle', 'scene whose routine block gives the default parameters',
+        self._declare(ParamSpec('scene', DEFAULT_SCENE, 'scene whose routine block gives the default parameters',
                                 read_only=True, allowed='a scene name under config/ or a YAML file path'))
         self._declare(ParamSpec('rate_hz', 50.0, 'command rate in simulated time (Hz); live', 1e-3, 10000.0))
         # command_driven: a shell scene's built-in cable routine becomes commands sent from here

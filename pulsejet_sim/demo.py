@@ -1,6 +1,6 @@
 """`make demo`: sim_node + controller_node as processes, every topic recorded to MCAP, then a summary.
 
-    python -m pulsejet_sim.demo [--scene pump_cycle] [--duration 10] [--real-time-factor 1] [--out FILE]
+    python -m pulsejet_sim.demo [--scene shell_robot] [--duration 10] [--real-time-factor 1] [--out FILE]
 
 The nodes run in their own ROS domain (ROS_DOMAIN_ID from the environment if set, otherwise one
 derived from this process id) with localhost-only discovery. The recording is written to
@@ -16,6 +16,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from pulsejet_sim.scene import DEFAULT_SCENE
 
 STARTUP_TIMEOUT_S = 60.0     # scene loading + JIT compilation of a cold cache
 STOP_TIMEOUT_S = 10.0
@@ -216,7 +218,7 @@ def default_out() -> Path:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='python -m pulsejet_sim.demo', description=__doc__.split('\n')[0])
-    parser.add_argument('--scene', default='pump_cycle', help='scene name under config/ or a YAML path')
+    parser.add_argument('--scene', default=DEFAULT_SCENE, help='scene name under config/ or a YAML path')
     parser.add_argument('--duration', type=float, default=10.0, help='simulated seconds (default 10)')
     parser.add_argument('--real-time-factor', type=float, default=1.0, help='simulated s per wall s (default 1)')
     parser.add_argument('--publish-rate', type=float, default=0.0, help='Hz; 0 = scene value')

@@ -39,6 +39,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from pulsejet_sim.scene import DEFAULT_SCENE
+
 DOMAIN_BASE = 201
 DOMAIN_SPAN = 32
 STARTUP_TIMEOUT_S = 90.0      # scene loading + JIT compilation of a cold cache
@@ -143,7 +145,7 @@ class SimHarness:
     wait_started: on entering, wait until the services answer and a first state arrived.
     """
 
-    def __init__(self, scene: str = 'pump_cycle', controller: bool = False, pacing: str = 'real_time',
+    def __init__(self, scene: str = DEFAULT_SCENE, controller: bool = False, pacing: str = 'real_time',
                  parameters: dict | None = None, controller_parameters: dict | None = None,
                  domain_id: int | None = None, log_dir: str | os.PathLike | None = None,
                  startup_timeout_s: float = STARTUP_TIMEOUT_S, stop_timeout_s: float = STOP_TIMEOUT_S,

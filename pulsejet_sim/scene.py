@@ -11,7 +11,7 @@ import yaml
 from pulsejet_sim.models import build_model
 from pulsejet_sim.models.base import Command, ModelError
 
-DEFAULT_SCENE = 'pump_cycle'
+DEFAULT_SCENE = 'shell_robot'   # the design card's default: the shell mantle
 
 
 class SceneError(ValueError):

@@ -5,7 +5,7 @@ A thin adapter: the physics lives in `pulsejet_sim.simulation`, the message layo
 serves.
 
 Parameters (see PARAMETERS below for the ranges; `ros2 param describe /sim_node <name>` shows them)
-  scene                  (string, read-only)  scene name under config/ or a YAML path; default pump_cycle
+  scene                  (string, read-only)  scene name under config/ or a YAML path; default shell_robot
   scene_overrides        (string, read-only)  YAML mapping merged into the scene, e.g. '{material: {stiffness_n_m: 200}}'
   pacing                 (string, live)       real_time | as_fast_as_possible | lockstep
   real_time_factor       (double, live)       simulated s per wall s under real_time pacing; a change
@@ -62,6 +62,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
 from pulsejet_sim.models.base import Command, CommandError, SimulationBlowUp, check_command_value
+from pulsejet_sim.scene import DEFAULT_SCENE
 
 #: command topics (relative names) -> Command field
 COMMAND_TOPICS = {
@@ -153,7 +154,7 @@ class ParamSpec:
 
 
 PARAMETERS = (
-    ParamSpec('scene', 'pump_cycle', 'scene name under config/ or path to a scene YAML', read_only=True,
+    ParamSpec('scene', DEFAULT_SCENE, 'scene name under config/ or path to a scene YAML', read_only=True,
               allowed='a scene name under config/ or a YAML file path'),
     ParamSpec('scene_overrides', '', 'YAML mapping merged into the scene section by section '
               '(e.g. "{material: {stiffness_n_m: 200}}"); empty = none', read_only=True,

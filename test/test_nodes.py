@@ -81,6 +81,8 @@ def start_node(ros_domain, tmp_path):
     started = []
 
     def start(module='pulsejet_sim.sim_node', **params):
+        # these tests exercise the pump/valve vehicle; the nodes' default scene is the shell robot
+        params.setdefault('scene', 'pump_cycle')
         p = NodeProcess(module, params, tmp_path / f'{module}.{len(started)}.log')
         started.append(p)
         return p
@@ -212,7 +214,7 @@ def volume_series(probe, since_wall):
 def test_bad_commands_rejected_good_ones_applied(tmp_path):
     from pulsejet_sim.harness import SimHarness
     from pulsejet_sim.models.base import Command
-    with SimHarness(parameters={'real_time_factor': 1.0, 'publish_rate_hz': 50.0}, log_dir=tmp_path) as h:
+    with SimHarness(scene='pump_cycle', parameters={'real_time_factor': 1.0, 'publish_rate_hz': 50.0}, log_dir=tmp_path) as h:
         h.wait_for(lambda s: s.time_s >= 0.3, 60.0)
         # idle (the scene's initial command: pump off): the cavity volume is at rest
         h.spin(0.5)
@@ -282,7 +284,7 @@ def test_blow_up_stops_stepping_without_nan(tmp_path):
     the node logs the cause, stops stepping and publishing, never publishes NaN and stays up."""
     from pulsejet_sim.harness import SimHarness
     from pulsejet_sim.models.base import Command
-    with SimHarness(parameters={'real_time_factor': 2.0, 'publish_rate_hz': 50.0}, log_dir=tmp_path) as h:
+    with SimHarness(scene='pump_cycle', parameters={'real_time_factor': 2.0, 'publish_rate_hz': 50.0}, log_dir=tmp_path) as h:
         h.wait_for(lambda s: s.time_s >= 0.1, 60.0)
         h.send(valve_opening=0.0, pump_flow_m3_s=Command.LIMITS['pump_flow_m3_s'][1])
         h.spin_until(lambda: 'physics blew up' in h.output(), 30.0, 'the physics to blow up')
@@ -303,7 +305,7 @@ def test_blow_up_stops_stepping_without_nan(tmp_path):
 def test_blow_up_with_duration_exits_non_zero(tmp_path):
     from pulsejet_sim.harness import SimHarness
     from pulsejet_sim.models.base import Command
-    with SimHarness(parameters={'real_time_factor': 2.0, 'duration_s': 60.0}, log_dir=tmp_path) as h:
+    with SimHarness(scene='pump_cycle', parameters={'real_time_factor': 2.0, 'duration_s': 60.0}, log_dir=tmp_path) as h:
         h.wait_for(lambda s: s.time_s >= 0.1, 60.0)
         h.send(valve_opening=0.0, pump_flow_m3_s=Command.LIMITS['pump_flow_m3_s'][1])
         assert h.wait_for_exit('sim_node', timeout_s=30.0) == 1, h.output()[-3000:]

@@ -35,7 +35,7 @@ def sim_now_s(node) -> float:
 def test_sim_time_follows_pause_step_and_reset(domain):
     """A plain rclpy node with use_sim_time follows /clock through running, a pause, a step and a
     reset (time jumps back to 0, like a Gazebo world reset)."""
-    with SimHarness(pacing='real_time', parameters={'real_time_factor': 1.0, 'publish_rate_hz': 50.0,
+    with SimHarness(scene='pump_cycle', pacing='real_time', parameters={'real_time_factor': 1.0, 'publish_rate_hz': 50.0,
                                                      'step_count': 500}, domain_id=domain) as h:
         follower = rclpy.create_node('follower', context=h.context, parameter_overrides=[
             Parameter('use_sim_time', Parameter.Type.BOOL, True)])
@@ -84,7 +84,7 @@ def test_sim_time_follows_pause_step_and_reset(domain):
 def test_parameters_validated_live_pacing_and_diagnostics(domain):
     """Rejections through the real SetParameters service name the value and the allowed range,
     good changes take effect; a real-time factor change re-anchors the clock (no jump)."""
-    with SimHarness(controller=True, pacing='real_time',
+    with SimHarness(scene='pump_cycle', controller=True, pacing='real_time',
                     parameters={'publish_rate_hz': 100.0, 'diagnostics_period_s': 0.25},
                     domain_id=domain) as h:
         bad = h.set_parameters(real_time_factor=-1.0)[0]
@@ -144,7 +144,7 @@ def test_lockstep_and_command_watchdog(domain):
     """Lockstep: time advances only on pulsejet/step. The watchdog applies the safe command after
     watchdog_timeout_s of simulated time without a command, says so in /diagnostics, and a new
     command clears it; watchdog_action=hold keeps the last command."""
-    with SimHarness(pacing='lockstep', domain_id=domain,
+    with SimHarness(scene='pump_cycle', pacing='lockstep', domain_id=domain,
                     parameters={'step_count': 100, 'watchdog_timeout_s': 0.05, 'diagnostics_period_s': 0.2}) as h:
         assert h.latest.time_s == 0.0
         h.spin(1.0)
@@ -190,7 +190,7 @@ def test_lockstep_and_command_watchdog(domain):
 def test_blow_up_reported_services_kept_and_reset_recovers(domain):
     """Pump against a shut valve on a soft shell: the physics stops, no NaN is published, the cause
     is an ERROR diagnostic, services are still served, reset brings back a finite state at t=0."""
-    with SimHarness(pacing='lockstep', domain_id=domain,
+    with SimHarness(scene='pump_cycle', pacing='lockstep', domain_id=domain,
                     parameters={'step_count': 2000, 'diagnostics_period_s': 0.2,
                                 'scene_overrides': {'material': {'stiffness_n_m': 200.0}}}) as h:
         h.send(pump_flow_m3_s=Command.LIMITS['pump_flow_m3_s'][1], valve_opening=0.0)
