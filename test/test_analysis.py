@@ -34,7 +34,7 @@ def run_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
             for topic, msg in messages.observation_messages(observation(t)) + messages.command_messages(Command()):
                 bag.write_message(topic, msg, log_ns)
             if i % 50 == 0:
-                ledger = {'stored_elastic': 0.1 * t, 'in_pump_work': 0.2 * t, 'closure_error': 0.0,
+                ledger = {'stored_elastic': 0.1 * t, 'in_actuation_work': 0.2 * t, 'closure_error': 0.0,
                           'closure_relative': 0.0 if t < 1.5 else 0.08}
                 bag.write_message('pulsejet/energy_ledger', messages.ledger_message(ledger, t), log_ns)
     return path
@@ -51,7 +51,7 @@ def test_summary_numbers(run_file: Path) -> None:
     n = round(DURATION_S / DT_S) + 1
     assert s['message_counts']['/pulsejet/velocity'] == n and s['message_counts']['/clock'] == n
     assert s['message_counts']['/pulsejet/energy_ledger'] == 5
-    assert s['energy_ledger_j'] == {'stored_elastic': pytest.approx(0.2), 'in_pump_work': pytest.approx(0.4),
+    assert s['energy_ledger_j'] == {'stored_elastic': pytest.approx(0.2), 'in_actuation_work': pytest.approx(0.4),
                                     'closure_error': 0.0, 'closure_relative': 0.08}
     assert s['energy_ledger_level'] == 'WARN'
     assert not s['truncated']

@@ -46,10 +46,13 @@ def write_run(path: Path, compression: str = 'zstd') -> None:
                 bag.write(topic, serialize_message(msg), log_ns)
             for topic, msg in messages.command_messages(Command(1e-3 * i, 0.5, 2.0 * i)):
                 bag.write(topic, serialize_message(msg), log_ns)
+            bag.write(messages.TOPIC_MANTLE_PROFILE,
+                      serialize_message(messages.profile_message([0.0, 0.01 * (1 + i)], [0.05, -0.05], obs.time_s)),
+                      log_ns)
             bag.write(messages.TOPIC_APPLIED_COMMAND,
                       serialize_message(messages.applied_command_message(Command(1e-3 * i, 0.5, 2.0 * i), obs.time_s)),
                       log_ns)
-            ledger = {'stored_elastic': 0.25 * i, 'in_pump_work': 1.0 / 3.0, 'closure_relative': 0.01 * i}
+            ledger = {'stored_elastic': 0.25 * i, 'in_actuation_work': 1.0 / 3.0, 'closure_relative': 0.01 * i}
             bag.write('pulsejet/energy_ledger', serialize_message(messages.ledger_message(ledger, obs.time_s)), log_ns)
 
 
@@ -94,7 +97,7 @@ def test_rosbags_decodes_every_message_from_stored_definitions(run_file: Path) -
         status = values['/pulsejet/energy_ledger'][i][1].status[0]
         assert status.name == 'pulsejet energy ledger'
         kv = {x.key: x.value for x in status.values}
-        assert float(kv['in_pump_work']) == 1.0 / 3.0        # repr keeps the exact float
+        assert float(kv['in_actuation_work']) == 1.0 / 3.0        # repr keeps the exact float
         assert status.level == (0 if 0.01 * i <= 0.05 else 1)
 
 
@@ -165,7 +168,7 @@ def test_stamp_rounding_and_ledger_levels() -> None:
               for c in (0.0, 0.05, -0.051, float('nan'))}
     assert [levels[c] for c in (0.0, 0.05, -0.051)] == [b'\x00', b'\x00', b'\x01']
     assert list(levels.values())[-1] == b'\x01'      # not finite -> WARN
-    ledger = {'in_pump_work': 0.1 + 0.2, 'out_drag': 1e-17}
+    ledger = {'in_actuation_work': 0.1 + 0.2, 'out_drag': 1e-17}
     assert messages.ledger_from_message(messages.ledger_message(ledger, 1.0)) == ledger
 
 

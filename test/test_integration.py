@@ -177,6 +177,7 @@ def test_demo_end_to_end(ros_domain, tmp_path):
     assert png.is_file(), text[-2000:]
     assert f'recording: {out}' in text and f'plot:      {png}' in text, text[-2000:]
     assert 'distance' in text, text[-2000:]
+    assert "scene 'shell_robot'" in text and '/pulsejet/mantle_profile' in text, text[-2000:]   # the default scene
 
 
 @pytest.mark.timeout(60)

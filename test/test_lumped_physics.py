@@ -62,7 +62,7 @@ def test_energy_ledger_closes_with_pump_and_valve_events():
         sim.step(100, routine.command(sim.time_s, sim.observe().volume_m3))
     ledger = sim.energy_ledger()
     print({k: round(v, 6) for k, v in ledger.items()})
-    assert ledger['in_pump_work'] > 1.0
+    assert ledger['in_actuation_work'] > 1.0
     assert ledger['out_valve'] > 0.0
     assert abs(ledger['closure_relative']) < 1e-5
 

@@ -200,7 +200,7 @@ def test_publishes_every_topic_stamped_with_sim_time(start_node, probe):
     ledger = probe.last('pulsejet/energy_ledger')
     assert stamp_s(ledger.header.stamp) < 1e6
     keys = {kv.key for kv in ledger.status[0].values}
-    assert {'in_pump_work', 'out_jet_kinetic', 'closure_error'} <= keys, keys
+    assert {'in_actuation_work', 'out_jet_kinetic', 'closure_error'} <= keys, keys
     n_ledger = len(probe.received['pulsejet/energy_ledger'])
     n_clock = len(probe.received['/clock'])
     assert n_ledger < n_clock / 3, f'ledger published {n_ledger} times vs {n_clock} clock messages (~5 Hz expected)'

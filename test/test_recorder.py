@@ -57,7 +57,9 @@ class Publisher:
         for i in range(N_STEPS):
             obs = observation(i)
             batch = messages.observation_messages(obs) + messages.command_messages(Command(1e-3, 0.25 * (i % 4), 0.0))
-            batch.append((messages.TOPIC_ENERGY_LEDGER, messages.ledger_message({'in_pump_work': 0.5 * i}, obs.time_s)))
+            batch.append((messages.TOPIC_ENERGY_LEDGER, messages.ledger_message({'in_actuation_work': 0.5 * i}, obs.time_s)))
+            batch.append((messages.TOPIC_MANTLE_PROFILE,
+                          messages.profile_message([0.0, 0.01 * (1 + i)], [0.05, -0.05], obs.time_s)))
             batch.append((messages.TOPIC_APPLIED_COMMAND,
                           messages.applied_command_message(Command(1e-3, 0.25 * (i % 4), 0.0), obs.time_s)))
             for topic, msg in batch:
@@ -123,7 +125,7 @@ def test_recorder_process_records_all_topics_until_sigint(tmp_path: Path, localh
     assert stamps == pytest.approx([0.02 * i for i in range(N_STEPS)])
     assert [m.data for m in found['/pulsejet/cmd/valve']] == [0.25 * (i % 4) for i in range(N_STEPS)]
     ledger = found['/pulsejet/energy_ledger'][-1].status[0]
-    assert ledger.values[0].key == 'in_pump_work' and float(ledger.values[0].value) == 0.5 * (N_STEPS - 1)
+    assert ledger.values[0].key == 'in_actuation_work' and float(ledger.values[0].value) == 0.5 * (N_STEPS - 1)
 
 
 @pytest.mark.timeout(60)

@@ -11,7 +11,7 @@ from pulsejet_sim.models.shell import ShellModel
 
 CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
 LEDGER_KEYS = {'stored_elastic', 'stored_kinetic_vehicle', 'stored_kinetic_outer_fluid', 'stored_kinetic_internal',
-               'in_pump_work', 'in_initial', 'out_jet_kinetic', 'out_drag', 'out_viscous', 'out_other',
+               'in_actuation_work', 'in_initial', 'out_jet_kinetic', 'out_drag', 'out_viscous', 'out_other',
                'closure_error', 'closure_relative'}
 
 
@@ -72,7 +72,7 @@ def test_ledger_closes_for_the_shipped_scenes(name, tol):
     led = model.energy_ledger(state)
     assert set(led) == LEDGER_KEYS
     assert all(np.isfinite(v) for v in led.values())
-    assert led['in_pump_work'] > 0          # the actuator did work
+    assert led['in_actuation_work'] > 0          # the actuator did work
     for key in ('out_jet_kinetic', 'out_drag', 'out_viscous'):
         assert led[key] > 0, key
     assert abs(led['closure_relative']) < tol, led

@@ -129,7 +129,7 @@ def test_cable_force_from_command():
     v0 = model.ref.volume_m3()
     assert model.observe(s1, 0.2, Command()).volume_m3 == pytest.approx(v0, rel=1e-9)
     assert model.observe(s2, 0.2, Command()).volume_m3 < 0.97 * v0
-    assert model.energy_ledger(s2)['in_pump_work'] > 0
+    assert model.energy_ledger(s2)['in_actuation_work'] > 0
 
 
 def test_reference_state_is_an_exact_equilibrium():

@@ -242,7 +242,7 @@ class LumpedModel:
             'stored_kinetic_outer_fluid': outer,
             'stored_kinetic_internal': internal,
             'in_initial': e0,
-            'in_pump_work': state[K.Y_W_PUMP],
+            'in_actuation_work': state[K.Y_W_PUMP],
             'out_jet_kinetic': state[K.Y_E_JET],
             'out_drag': state[K.Y_E_DRAG],
             'out_viscous': state[K.Y_E_VISC],

@@ -39,7 +39,7 @@ pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell:
 
 *Energy ledger.*  Stored: elastic, shell + payload kinetic ("vehicle"), added-mass kinetic
 ("outer fluid"), ``1/2 rho V U^2`` ("internal").  In: actuation work (cable force times wall
-velocity, plus ``dW/dt`` of the muscle's moving reference) is reported under ``in_pump_work``
+velocity, plus ``dW/dt`` of the muscle's moving reference) is reported under ``in_actuation_work``
 (the only "in" key of the contract).  Out: jet kinetic energy in the earth frame, drag (shell
 and vehicle), Kelvin-Voigt dissipation, and ``out_other`` = inflow mixing (suction kinetic energy
 and ram loss) + the thrust mismatch ``(1 - C_f) rho A u_j^2 U``.  With C_f = 1 all energy
@@ -622,14 +622,14 @@ class ShellModel:
         T = state[6 * self.n_nodes:]
         led = {
             'stored_elastic': el, 'stored_kinetic_vehicle': kv, 'stored_kinetic_outer_fluid': ko,
-            'stored_kinetic_internal': ki, 'in_pump_work': float(T[sk.S_IN]), 'in_initial': float(self._initial_energy),
+            'stored_kinetic_internal': ki, 'in_actuation_work': float(T[sk.S_IN]), 'in_initial': float(self._initial_energy),
             'out_jet_kinetic': float(T[sk.S_JET]), 'out_drag': float(T[sk.S_DRAG]),
             'out_viscous': float(T[sk.S_VISC]), 'out_other': float(T[sk.S_OTHER]),
         }
         out = led['out_jet_kinetic'] + led['out_drag'] + led['out_viscous'] + led['out_other']
-        err = tot - led['in_initial'] - led['in_pump_work'] + out
+        err = tot - led['in_initial'] - led['in_actuation_work'] + out
         led['closure_error'] = float(err)
-        led['closure_relative'] = float(err / max(led['in_initial'] + led['in_pump_work'], 1e-300))
+        led['closure_relative'] = float(err / max(led['in_initial'] + led['in_actuation_work'], 1e-300))
         return led
 
     def profile_of(self, state):
