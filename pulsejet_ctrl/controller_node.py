@@ -24,20 +24,15 @@ Publishes pulsejet/cmd/pump_flow (m^3/s), pulsejet/cmd/valve (0..1), pulsejet/cm
 from __future__ import annotations
 
 import math
-import signal
 import sys
 
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from pulsejet_ctrl import routines as _routines
-from pulsejet_sim.models.base import Command
 from pulsejet_sim.sim_node import ParamSpec
 from pulsejet_sim.scene import DEFAULT_SCENE
 
@@ -179,40 +174,13 @@ class ControllerNode(Node):
             pub.publish(msg)
         self.commands_sent += 1
 
+    def on_stop(self, signum):
+        self.get_logger().info(f'stopping after {self.commands_sent} commands')
+
 
 def main(args=None):
-    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = {'signal': None}
-
-    def on_signal(signum, _frame):
-        stop['signal'] = signum
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    node = None
-    code = 0
-    try:
-        node = ControllerNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while rclpy.ok() and stop['signal'] is None:
-            executor.spin_once(timeout_sec=0.05)
-        node.get_logger().info(f'stopping after {node.commands_sent} commands')
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:   # bad scene or parameter: one clear line
-        print(f'controller_node: error: {type(exc).__name__}: {exc}', file=sys.stderr, flush=True)
-        code = 2
-    except Exception as exc:   # a bug: keep the traceback
-        import traceback
-        traceback.print_exc()
-        print(f'controller_node: error: {type(exc).__name__}: {exc}', file=sys.stderr, flush=True)
-        code = 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    from pulsejet_sim.node_main import run_node
+    return run_node('controller_node', ControllerNode, args)
 
 
 if __name__ == '__main__':

@@ -51,24 +51,22 @@ import sys
 import threading
 import time
 
-import rclpy
 from rclpy.node import Node
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
                                 SetParametersResult)
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
 from pulsejet_sim.models.base import Command, CommandError, SimulationBlowUp, check_command_value
+from pulsejet_sim import messages
 from pulsejet_sim.scene import DEFAULT_SCENE
 
 #: command topics (relative names) -> Command field
 COMMAND_TOPICS = {
-    'pulsejet/cmd/pump_flow': 'pump_flow_m3_s',
-    'pulsejet/cmd/valve': 'valve_opening',
-    'pulsejet/cmd/cable_force': 'cable_force_n',
+    messages.TOPIC_CMD_PUMP_FLOW: 'pump_flow_m3_s',
+    messages.TOPIC_CMD_VALVE: 'valve_opening',
+    messages.TOPIC_CMD_CABLE_FORCE: 'cable_force_n',
 }
 SERVICE_PAUSE = 'pulsejet/pause'
 SERVICE_STEP = 'pulsejet/step'
@@ -264,7 +262,6 @@ class SimNode(Node):
         super().__init__('sim_node', **kwargs)
         # imported here: a broken scene or model then fails inside main() with one clear line
         import yaml
-        from pulsejet_sim import messages
         from pulsejet_sim.scene import load_scene
         from pulsejet_sim.simulation import Simulation
         self._messages = messages
@@ -573,6 +570,16 @@ class SimNode(Node):
 
     # -- pacing thread --------------------------------------------------------------------------
 
+    def start(self):
+        self.start_pacing()
+
+    def close(self):
+        self.stop_pacing()
+
+    def on_stop(self, signum):
+        if signum is not None:
+            self.get_logger().info(f'{signal.Signals(signum).name} received at t={self.sim.time_s:.3f} s; shutting down')
+
     def start_pacing(self):
         """Start the thread that ticks at publish_rate_hz on a drift-free wall-clock grid (sleeping
         between ticks, so the rate does not depend on the executor's wait-set overhead)."""
@@ -839,47 +846,8 @@ class SimNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = {'signal': None}
-
-    def on_signal(signum, _frame):
-        stop['signal'] = signum
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    node = None
-    code = 0
-    try:
-        node = SimNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        node.start_pacing()
-        while rclpy.ok() and stop['signal'] is None and not node.done:
-            executor.spin_once(timeout_sec=0.05)
-        code = node.exit_code
-        if node.done:   # let the last samples reach reliable subscribers before the writers go away
-            end = time.monotonic() + 0.3
-            while rclpy.ok() and stop['signal'] is None and time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.05)
-        if stop['signal'] is not None:
-            node.get_logger().info(f'{signal.Signals(stop["signal"]).name} received at '
-                                   f't={node.sim.time_s:.3f} s; shutting down')
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:   # bad scene or parameter: one clear line
-        print(f'sim_node: error: {type(exc).__name__}: {exc}', file=sys.stderr, flush=True)
-        code = 2
-    except Exception as exc:   # a bug: keep the traceback
-        import traceback
-        traceback.print_exc()
-        print(f'sim_node: error: {type(exc).__name__}: {exc}', file=sys.stderr, flush=True)
-        code = 2
-    finally:
-        if node is not None:
-            node.stop_pacing()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    from pulsejet_sim.node_main import run_node
+    return run_node('sim_node', SimNode, args)
 
 
 if __name__ == '__main__':

@@ -4,7 +4,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from rclpy.serialization import serialize_message
 
 from pulsejet_sim import analysis, messages
 from pulsejet_sim.bag.writer import BagWriter

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import isolate_ros
 
 rclpy = pytest.importorskip('rclpy')
 from rosbags.highlevel import AnyReader  # noqa: E402
@@ -26,13 +27,7 @@ REAL_TIME_FACTOR = 3.0
 
 @pytest.fixture
 def ros_domain(monkeypatch):
-    domain = 1 + (os.getpid() + DOMAIN_OFFSET) % 100
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    monkeypatch.setenv('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
-    monkeypatch.setenv('RCUTILS_COLORIZED_OUTPUT', '0')
-    monkeypatch.setenv('PYTHONUNBUFFERED', '1')
-    return domain
+    return isolate_ros(monkeypatch, DOMAIN_OFFSET)
 
 
 def read_bag(path: Path) -> dict[str, list[tuple[float, object]]]:

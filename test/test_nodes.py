@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import isolate_ros
 
 rclpy = pytest.importorskip('rclpy')
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
@@ -37,13 +38,7 @@ def ros_float(x: float) -> str:
 
 @pytest.fixture
 def ros_domain(monkeypatch):
-    domain = 1 + (os.getpid() + DOMAIN_OFFSET) % 100
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    monkeypatch.setenv('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
-    monkeypatch.setenv('RCUTILS_COLORIZED_OUTPUT', '0')
-    monkeypatch.setenv('PYTHONUNBUFFERED', '1')
-    return domain
+    return isolate_ros(monkeypatch, DOMAIN_OFFSET)
 
 
 class NodeProcess:

@@ -1,6 +1,5 @@
 """Shell model: measured convergence order in the time step (the mesh order is in test_shell_static)."""
 import copy
-import math
 import pathlib
 
 import numpy as np

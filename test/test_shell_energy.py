@@ -1,5 +1,4 @@
 """Shell model energy: conservation without dissipation, and the ledger of the full model."""
-import copy
 import pathlib
 
 import numpy as np

@@ -1,0 +1,76 @@
+"""The process life of a pulsejet node: rclpy start-up, SIGINT/SIGTERM, spinning, exit codes.
+
+sim_node and controller_node share it so that both stop the same way: a signal ends the spin loop
+(rclpy's own handlers are off, so the node can log and close cleanly), a bad scene or parameter is
+one clear line and exit code 2, and a bug keeps its traceback.
+"""
+from __future__ import annotations
+
+import signal
+import sys
+import time
+import traceback
+from typing import Callable
+
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+
+#: after the node says it is done, keep spinning this long so the last samples reach reliable
+#: subscribers before the writers go away
+DRAIN_S = 0.3
+
+
+def run_node(name: str, make_node: Callable[[], Node], args=None) -> int:
+    """Create the node, spin until a signal or until ``node.done``, then close it.
+
+    Optional hooks on the node: ``start()`` after it joined the executor, ``done`` (bool),
+    ``exit_code`` (int, default 0), ``on_stop(signum or None)`` before closing, ``close()``.
+    Returns the process exit code.
+    """
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    stop = {'signal': None}
+
+    def on_signal(signum, _frame):
+        stop['signal'] = signum
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    node = None
+    code = 0
+
+    def running() -> bool:
+        return rclpy.ok() and stop['signal'] is None
+
+    try:
+        node = make_node()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        if hasattr(node, 'start'):
+            node.start()
+        while running() and not getattr(node, 'done', False):
+            executor.spin_once(timeout_sec=0.05)
+        code = getattr(node, 'exit_code', 0)
+        if getattr(node, 'done', False):
+            end = time.monotonic() + DRAIN_S
+            while running() and time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+        if hasattr(node, 'on_stop'):
+            node.on_stop(stop['signal'])
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, ParameterException) as exc:   # bad scene or parameter: one clear line
+        print(f'{name}: error: {type(exc).__name__}: {exc}', file=sys.stderr, flush=True)
+        code = 2
+    except Exception as exc:   # a bug: keep the traceback
+        traceback.print_exc()
+        print(f'{name}: error: {type(exc).__name__}: {exc}', file=sys.stderr, flush=True)
+        code = 2
+    finally:
+        if node is not None:
+            if hasattr(node, 'close'):
+                node.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code

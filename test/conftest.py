@@ -1,0 +1,14 @@
+"""Shared test set-up."""
+import os
+
+
+def isolate_ros(monkeypatch, offset: int) -> int:
+    """A ROS domain of this test run (1..100, from the pid and a per-file offset), localhost
+    discovery only, unbuffered and uncoloured logs for the child processes. Returns the domain."""
+    domain = 1 + (os.getpid() + offset) % 100
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
+    monkeypatch.setenv('RCUTILS_COLORIZED_OUTPUT', '0')
+    monkeypatch.setenv('PYTHONUNBUFFERED', '1')
+    return domain
