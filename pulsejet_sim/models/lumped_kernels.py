@@ -364,7 +364,6 @@ def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
         for i in range(NY):
             last[i] = y[i]
         valve = y[Y_VALVE]
-        tmp[:] = y
         rhs(flags, y, valve, q_cmd, p, k1, diag)
         # Sub-steps keep RK4 inside its stability region when the valve throttles a fast flow
         # (the loss rate grows like 1/opening^2) or a light shell meets a stiff spring.
