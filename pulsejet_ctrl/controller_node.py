@@ -56,14 +56,6 @@ INTEGER_FIELDS = ('cycles',)
 ROUTINE_SPECS = {'pump_valve': _routines.PUMP_VALVE_SPEC, 'cable': _routines.CABLE_SPEC}
 
 
-def message_pairs(messages):
-    if messages is None:
-        return []
-    if hasattr(messages, 'items'):
-        return list(messages.items())
-    return list(messages)
-
-
 class ControllerNode(Node):
 
     def __init__(self, **kwargs):
@@ -167,7 +159,7 @@ class ControllerNode(Node):
 
     def _send(self, t):
         cmd = self.routine.command(t, self.volume_m3)
-        for topic, msg in message_pairs(self._messages.command_messages(cmd)):
+        for topic, msg in self._messages.command_messages(cmd):
             pub = self._pubs.get(topic)
             if pub is None:
                 pub = self._pubs[topic] = self.create_publisher(type(msg), topic, self._qos)

@@ -181,15 +181,6 @@ PARAMETERS = (
 PARAMETER_SPECS = {p.name: p for p in PARAMETERS}
 
 
-def message_pairs(messages):
-    """Accept what messages.py returns (a mapping topic -> msg or an iterable of (topic, msg))."""
-    if messages is None:
-        return []
-    if hasattr(messages, 'items'):
-        return list(messages.items())
-    return list(messages)
-
-
 def observation_is_finite(obs) -> bool:
     for f in dataclasses.fields(obs):
         v = getattr(obs, f.name)
@@ -729,7 +720,7 @@ class SimNode(Node):
             if profile is not None and all(math.isfinite(float(v)) for arr in profile for v in arr):
                 msg = self._messages.profile_message(*profile, obs.time_s)
                 self._publisher_for(self._messages.TOPIC_MANTLE_PROFILE, type(msg)).publish(msg)
-        for topic, msg in message_pairs(self._messages.observation_messages(obs)):
+        for topic, msg in self._messages.observation_messages(obs):
             self._publisher_for(topic, type(msg)).publish(msg)
         self._published_steps = self.sim.steps
         if ledger:
