@@ -27,13 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from pulsejet_sim.node_params import ros_value  # noqa: E402
+
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'sim_node.md'
-
-
-def ros_float(x: float) -> str:
-    s = repr(float(x))
-    return format(float(x), '.12f') if ('e' in s or 'n' in s) else s
 
 
 def cpu_seconds(pid: int) -> float:
@@ -71,8 +69,8 @@ def run(seconds: float, rtf: float, publish_rate_hz: float, scene: str, controll
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     domain = int(env['ROS_DOMAIN_ID'])
     sim_cmd = [sys.executable, '-m', 'pulsejet_sim.sim_node', '--ros-args',
-               '-p', f'scene:={scene}', '-p', f'real_time_factor:={ros_float(rtf)}',
-               '-p', f'publish_rate_hz:={ros_float(nominal_rate)}']
+               '-p', f'scene:={scene}', '-p', f'real_time_factor:={ros_value(rtf)}',
+               '-p', f'publish_rate_hz:={ros_value(nominal_rate)}']
     procs = []
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)

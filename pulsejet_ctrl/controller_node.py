@@ -33,7 +33,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from pulsejet_ctrl import routines as _routines
-from pulsejet_sim.sim_node import ParamSpec
+from pulsejet_sim.node_params import ParamSpec, check_parameters
 from pulsejet_sim.scene import DEFAULT_SCENE
 
 #: routine field -> description (ranges and defaults come from the routine's spec)
@@ -120,15 +120,9 @@ class ControllerNode(Node):
         return spec.check(self.get_parameter(spec.name).value)
 
     def _on_set_parameters(self, params):
-        checked = {}
-        for param in params:
-            spec = self._specs.get(param.name)
-            if spec is None:
-                continue
-            try:
-                checked[param.name] = spec.check(param.value)
-            except ValueError as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
+        checked, rejection = check_parameters(params, self._specs)
+        if rejection is not None:
+            return rejection
         if self._ready and 'rate_hz' in checked:
             self.rate_hz = checked['rate_hz']
             self.period_s = 1.0 / self.rate_hz

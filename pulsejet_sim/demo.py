@@ -17,6 +17,7 @@ import sys
 import time
 from pathlib import Path
 
+from pulsejet_sim.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 
 STARTUP_TIMEOUT_S = 60.0     # scene loading + JIT compilation of a cold cache
@@ -25,24 +26,6 @@ STOP_TIMEOUT_S = 10.0
 
 class DemoError(RuntimeError):
     pass
-
-
-def ros_float(x: float) -> str:
-    """A --ros-args value that rcl parses as a double (never as an integer or a string)."""
-    x = float(x)
-    s = repr(x)
-    if 'e' in s or 'n' in s:
-        s = format(x, '.12f')
-    return s
-
-
-def node_command(module: str, params: dict) -> list[str]:
-    cmd = [sys.executable, '-m', module, '--ros-args']
-    for name, value in params.items():
-        if isinstance(value, float):
-            value = ros_float(value)
-        cmd += ['-p', f'{name}:={value}']
-    return cmd
 
 
 def demo_environment(env=None) -> dict:

@@ -33,12 +33,12 @@ import math
 import os
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any, Callable
 
+from pulsejet_sim.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 
 DOMAIN_BASE = 201
@@ -78,19 +78,6 @@ def default_domain_id() -> int:
     return DOMAIN_BASE + os.getpid() % DOMAIN_SPAN
 
 
-def ros_value(value) -> str:
-    """A --ros-args value: doubles always parse as doubles, strings as strings."""
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, float):
-        s = repr(value)
-        return format(value, '.12f') if ('e' in s or 'n' in s) else s
-    if isinstance(value, str):
-        return value if value and all(c.isalnum() or c in '_./-' for c in value) and not value[0].isdigit() \
-            else "'" + value.replace("'", "\\'") + "'"
-    return str(value)
-
-
 def _stamp_s(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
@@ -101,9 +88,7 @@ class NodeProcess:
     def __init__(self, module: str, params: dict, log_path: Path, env: dict):
         self.module = module
         self.log_path = log_path
-        args = [sys.executable, '-m', module, '--ros-args']
-        for k, v in params.items():
-            args += ['-p', f'{k}:={ros_value(v)}']
+        args = node_command(module, params)
         self._log = open(log_path, 'wb')
         self.proc = subprocess.Popen(args, stdout=self._log, stderr=subprocess.STDOUT,
                                      stdin=subprocess.DEVNULL, env=env)

@@ -52,14 +52,14 @@ import threading
 import time
 
 from rclpy.node import Node
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
-                                SetParametersResult)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
 from pulsejet_sim.models.base import Command, CommandError, SimulationBlowUp, check_command_value
 from pulsejet_sim import messages
+from pulsejet_sim.node_params import ParamSpec, check_parameters
 from pulsejet_sim.scene import DEFAULT_SCENE
 
 #: command topics (relative names) -> Command field
@@ -89,66 +89,6 @@ AFAP_BUDGET = 0.8
 RTF_WARN_FRACTION = 0.9       # achieved < 90 % of the requested factor (real_time, running) -> WARN
 CLOSURE_WARN_RELATIVE = 0.05  # |energy closure| above 5 % -> WARN
 STABLE_MARGIN_WARN = 1.0      # stable step / dt below 1 -> WARN (the step is above the stable estimate)
-
-
-@dataclasses.dataclass(frozen=True)
-class ParamSpec:
-    """One parameter: its default, description, type and allowed values (declared from this table)."""
-    name: str
-    default: object
-    description: str
-    low: float | None = None
-    high: float | None = None
-    choices: tuple[str, ...] | None = None
-    read_only: bool = False
-    allowed: str | None = None   # wording of the allowed values when the range alone is not enough
-
-    def allowed_text(self) -> str:
-        if self.allowed:
-            return self.allowed
-        if self.choices:
-            return 'one of ' + ', '.join(self.choices)
-        if self.low is not None:
-            kind = 'a whole number' if isinstance(self.default, int) and not isinstance(self.default, bool) \
-                else 'a number'
-            return f'{kind} in [{self.low:g}, {self.high:g}]'
-        if isinstance(self.default, bool):
-            return 'true or false'
-        return 'a string'
-
-    def descriptor(self) -> ParameterDescriptor:
-        d = ParameterDescriptor(description=f'{self.description}; allowed: {self.allowed_text()}',
-                                read_only=self.read_only)
-        if isinstance(self.default, bool):
-            d.type = ParameterType.PARAMETER_BOOL
-        elif isinstance(self.default, int):
-            d.type = ParameterType.PARAMETER_INTEGER
-            d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)]
-        elif isinstance(self.default, float):
-            # doubles accept integers too (`real_time_factor:=2`): dynamically typed, checked in
-            # the on-set callback (rclpy applies the range itself to double values)
-            d.dynamic_typing = True
-            d.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high),
-                                                         step=0.0)]
-        else:
-            d.type = ParameterType.PARAMETER_STRING
-            if self.choices:
-                d.additional_constraints = 'one of: ' + ', '.join(self.choices)
-        return d
-
-    def check(self, value):
-        """The value converted (float for doubles), or ValueError naming the value and what is allowed."""
-        if isinstance(self.default, bool):
-            ok = isinstance(value, bool)
-        elif isinstance(self.default, int):
-            ok = isinstance(value, int) and not isinstance(value, bool) and self.low <= value <= self.high
-        elif isinstance(self.default, float):
-            return check_number(self.name, value, self.low, self.high, self.allowed_text())
-        else:
-            ok = isinstance(value, str) and (self.choices is None or value in self.choices)
-        if not ok:
-            raise ValueError(f'parameter {self.name}={value!r} rejected; allowed: {self.allowed_text()}')
-        return value
 
 
 PARAMETERS = (
@@ -187,17 +127,6 @@ def observation_is_finite(obs) -> bool:
         if isinstance(v, float) and not math.isfinite(v):
             return False
     return True
-
-
-def check_number(name, value, low, high, allowed=None) -> float:
-    """value (an int or float parameter) as float if finite and in [low, high]; else ValueError."""
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if ok:
-        value = float(value)
-        ok = math.isfinite(value) and low <= value <= high
-    if not ok:
-        raise ValueError(f'parameter {name}={value!r} rejected; allowed: {allowed or f"a number in [{low:g}, {high:g}]"}')
-    return value
 
 
 class Pacer:
@@ -385,15 +314,9 @@ class SimNode(Node):
             return self._set_parameters_locked(params)
 
     def _set_parameters_locked(self, params):
-        checked = {}
-        for param in params:
-            spec = PARAMETER_SPECS.get(param.name)
-            if spec is None:
-                continue
-            try:
-                checked[param.name] = spec.check(param.value)
-            except ValueError as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
+        checked, rejection = check_parameters(params, PARAMETER_SPECS)
+        if rejection is not None:
+            return rejection
         if not self._ready:   # declaration: values are read in __init__
             return SetParametersResult(successful=True)
         for name, value in checked.items():

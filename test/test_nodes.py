@@ -8,12 +8,12 @@ import math
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 from conftest import isolate_ros
+from pulsejet_sim.node_params import node_command
 
 rclpy = pytest.importorskip('rclpy')
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
@@ -31,11 +31,6 @@ def stamp_s(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def ros_float(x: float) -> str:
-    s = repr(float(x))
-    return format(float(x), '.12f') if ('e' in s or 'n' in s) else s
-
-
 @pytest.fixture
 def ros_domain(monkeypatch):
     return isolate_ros(monkeypatch, DOMAIN_OFFSET)
@@ -46,9 +41,7 @@ class NodeProcess:
 
     def __init__(self, module: str, params: dict, log_path: Path):
         self.log_path = log_path
-        args = [sys.executable, '-m', module, '--ros-args']
-        for k, v in params.items():
-            args += ['-p', f'{k}:={ros_float(v) if isinstance(v, float) else v}']
+        args = node_command(module, params)
         self._log = open(log_path, 'wb')
         self.proc = subprocess.Popen(args, stdout=self._log, stderr=subprocess.STDOUT,
                                      stdin=subprocess.DEVNULL, env=dict(os.environ))

@@ -1,0 +1,121 @@
+"""Node parameters and command lines: one table entry per parameter (default, description, range,
+read-only), the check that a live change must pass, and the `--ros-args` form of a value.
+
+Shared by sim_node and controller_node (declaration and on-set validation) and by everything that
+starts a node as a process (the demo, the harness, tests, benchmarks).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
+                                SetParametersResult)
+
+
+@dataclasses.dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: its default, description, type and allowed values (declared from this table)."""
+    name: str
+    default: object
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] | None = None
+    read_only: bool = False
+    allowed: str | None = None   # wording of the allowed values when the range alone is not enough
+
+    def allowed_text(self) -> str:
+        if self.allowed:
+            return self.allowed
+        if self.choices:
+            return 'one of ' + ', '.join(self.choices)
+        if self.low is not None:
+            kind = 'a whole number' if isinstance(self.default, int) and not isinstance(self.default, bool) \
+                else 'a number'
+            return f'{kind} in [{self.low:g}, {self.high:g}]'
+        if isinstance(self.default, bool):
+            return 'true or false'
+        return 'a string'
+
+    def descriptor(self) -> ParameterDescriptor:
+        d = ParameterDescriptor(description=f'{self.description}; allowed: {self.allowed_text()}',
+                                read_only=self.read_only)
+        if isinstance(self.default, bool):
+            d.type = ParameterType.PARAMETER_BOOL
+        elif isinstance(self.default, int):
+            d.type = ParameterType.PARAMETER_INTEGER
+            d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)]
+        elif isinstance(self.default, float):
+            # doubles accept integers too (`real_time_factor:=2`): dynamically typed, checked in
+            # the on-set callback (rclpy applies the range itself to double values)
+            d.dynamic_typing = True
+            d.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high),
+                                                         step=0.0)]
+        else:
+            d.type = ParameterType.PARAMETER_STRING
+            if self.choices:
+                d.additional_constraints = 'one of: ' + ', '.join(self.choices)
+        return d
+
+    def check(self, value):
+        """The value converted (float for doubles), or ValueError naming the value and what is allowed."""
+        if isinstance(self.default, bool):
+            ok = isinstance(value, bool)
+        elif isinstance(self.default, int):
+            ok = isinstance(value, int) and not isinstance(value, bool) and self.low <= value <= self.high
+        elif isinstance(self.default, float):
+            return check_number(self.name, value, self.low, self.high, self.allowed_text())
+        else:
+            ok = isinstance(value, str) and (self.choices is None or value in self.choices)
+        if not ok:
+            raise ValueError(f'parameter {self.name}={value!r} rejected; allowed: {self.allowed_text()}')
+        return value
+
+
+def check_number(name, value, low, high, allowed=None) -> float:
+    """value (an int or float parameter) as float if finite and in [low, high]; else ValueError."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if ok:
+        value = float(value)
+        ok = math.isfinite(value) and low <= value <= high
+    if not ok:
+        raise ValueError(f'parameter {name}={value!r} rejected; allowed: {allowed or f"a number in [{low:g}, {high:g}]"}')
+    return value
+
+
+def check_parameters(params, specs) -> tuple[dict, SetParametersResult | None]:
+    """Check rclpy Parameters against their specs (unknown names pass through unchecked): the
+    converted values, or a rejection naming the first bad value and what is allowed."""
+    checked = {}
+    for param in params:
+        spec = specs.get(param.name)
+        if spec is None:
+            continue
+        try:
+            checked[param.name] = spec.check(param.value)
+        except ValueError as exc:
+            return checked, SetParametersResult(successful=False, reason=str(exc))
+    return checked, None
+
+
+def ros_value(value) -> str:
+    """A --ros-args value: doubles always parse as doubles, strings as strings."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, float):
+        s = repr(value)
+        return format(value, '.12f') if ('e' in s or 'n' in s) else s
+    if isinstance(value, str):
+        return value if value and all(c.isalnum() or c in '_./-' for c in value) and not value[0].isdigit() \
+            else "'" + value.replace("'", "\\'") + "'"
+    return str(value)
+
+
+def node_command(module: str, params: dict) -> list[str]:
+    """`python -m module --ros-args -p name:=value ...` with this interpreter."""
+    cmd = [sys.executable, '-m', module, '--ros-args']
+    for name, value in params.items():
+        cmd += ['-p', f'{name}:={ros_value(value)}']
+    return cmd
