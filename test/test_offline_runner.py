@@ -106,3 +106,11 @@ def test_shell_cable_from_commands_matches_the_built_in_routine_and_records_the_
     assert len(profile) == len(r) and profile[0].y == pytest.approx(r[0]) and profile[-1].x == pytest.approx(z[-1])
     cable = [m.data for m in msgs['/pulsejet/cmd/cable_force']]
     assert max(cable) == pytest.approx(8.0, rel=0.02) and min(cable) == 0.0
+
+
+def test_shell_scene_is_deterministic():
+    a = run_scene(load_scene('shell_robot'), 0.5)
+    b = run_scene(load_scene('shell_robot'), 0.5)
+    assert a.sim.steps == b.sim.steps == 50
+    assert np.array_equal(a.sim.state, b.sim.state)
+    assert a.sim.observe().velocity_m_s > 0.0
