@@ -349,24 +349,21 @@ def resimulate(bag_path: str | Path, scene: Any = None, *, commands: Iterable[tu
 
 
 # ---- CLI ------------------------------------------------------------------------------------------
-def _nonneg_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and v >= 0):
-        raise argparse.ArgumentTypeError(f'{text!r} rejected; allowed: a finite number >= 0')
-    return v
+def _float_above(low: float, inclusive: bool):
+    """argparse type: a finite float > low (>= low when inclusive), or a message saying what is allowed."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and (v >= low if inclusive else v > low)):
+            raise argparse.ArgumentTypeError(f'{text!r} rejected; allowed: a finite number {">=" if inclusive else ">"} {low:g}')
+        return v
+    return parse
 
 
-def _pos_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f'{text!r} rejected; allowed: a finite number > 0')
-    return v
+_nonneg_float = _float_above(0.0, inclusive=True)
+_pos_float = _float_above(0.0, inclusive=False)
 
 
 def main_resim(argv: Sequence[str] | None = None) -> int:

@@ -1,8 +1,6 @@
 """The one stepping loop that sim_node, the offline runner, the tests and the benchmarks share."""
 from __future__ import annotations
 
-import numpy as np
-
 from pulsejet_sim.models.base import Command, Observation, SimulationBlowUp
 
 
@@ -57,6 +55,3 @@ class Simulation:
 
     def stable_step_s(self) -> float:
         return self.model.stable_step_s(self.state)
-
-    def snapshot(self) -> np.ndarray:
-        return self.state.copy()

@@ -292,8 +292,8 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
 
 @njit(cache=True)
 def _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag):
+    """One classical RK4 step of size h; k1 must already hold rhs at y (the caller evaluated it)."""
     n = N_INTEGRATED
-    rhs(flags, y, valve, q_cmd, p, k1, diag)
     for i in range(n):
         tmp[i] = y[i] + 0.5 * h * k1[i]
     tmp[Y_VALVE] = valve
@@ -374,7 +374,9 @@ def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
             if n_sub > MAX_SUBSTEPS:
                 return step, ERR_SUBSTEPS
         h = dt / n_sub
-        for _ in range(n_sub):
+        for sub in range(n_sub):
+            if sub > 0:   # the first k1 is the evaluation that sized the sub-steps
+                rhs(flags, y, valve, q_cmd, p, k1, diag)
             _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag)
         # the valve moves at its stroke rate between steps
         if valve_cmd != valve:
