@@ -37,6 +37,17 @@ water ``rho V`` moves with the vehicle.  Vehicle: ``(M + m_x + rho V) U' = T - 1
 pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell:
 ``-1/2 rho C_t A_i |v_t| v_t`` along the current tangent.
 
+*Couplings* (scene key ``coupling``; docs/PHYSICS_SHELL.md has the citations).  ``consistent``
+(default): as described above.  ``paper``: paper 000's scheme (section 3.3, Fig. 5): the shell is
+solved in the body frame (its drag and added mass see only its own motion relative to the body),
+the water loads the wall only through drag and added mass (no cavity pressure), and the vehicle
+``(M + m_x + rho V) U' = T - D - ram`` is driven by the thrust of the shell's volume rate; the
+vehicle velocity enters only the position update.  Its ledger books the jet's kinetic energy flux
+``1/2 rho A |u_j|^3``, which no wall force pays for in that scheme, as ``created_unpaid_jet_kinetic``.
+``jet.outlet``: ``ring`` (a fixed outlet of ``outlet_radius_m`` in the clamped ring; the consistent
+default) or ``edge`` (the paper default: the mantle's free edge is the nozzle, radius and angle free
+at that edge, ``A_out = pi r_edge(t)^2``).
+
 *Energy ledger.*  Stored: elastic, shell + payload kinetic ("vehicle"), added-mass kinetic
 ("outer fluid"), ``1/2 rho V U^2`` ("internal").  In: actuation work (cable force times wall
 velocity, plus ``dW/dt`` of the muscle's moving reference) is reported under ``in_actuation_work``
@@ -67,6 +78,7 @@ retried as 4, 16, 64 sub-steps before SimulationBlowUp is raised.
 
 Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated)::
 
+    coupling:   consistent | paper
     simulation: {dt_s, duration_s, integrator: implicit_midpoint|backward_euler|verlet,
                  newton_tolerance: 1e-9, specialise_kernel: false}
     geometry:   {kind: ellipsoid, semi_axis_axial_m, semi_axis_radial_m, opening_radius_m}
@@ -78,12 +90,14 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
                  shear_correction: 1, rotary_inertia_scale: 1}
     fluid:      {density_kg_m3, added_mass_coefficient: 1.1, added_mass_length_m: max(r0)/2,
                  tangential_drag_coefficient: 0.05, drag_coefficient: 1.0}
-    jet:        {outlet_radius_m: ring/2, inlet_area_m2: A_out + 3 pi (10 mm)^2, thrust_coefficient: 1}
+    jet:        {outlet: ring|edge, outlet_radius_m: ring/2 (ring only), inlet_area_m2: A_out + 3 pi (10 mm)^2,
+                 thrust_coefficient: 1}
     vehicle:    {mass_kg (shell + payload), added_mass_kg: 0, initial_velocity_m_s: 0}
     actuation:  {kind: none|cable|muscle, source: routine|command (cable only),
                  amplitude (cable: peak total radial pull, N; muscle: fractional drop of the desired
                  hoop radius, 0..0.95), distribution: uniform|rising|falling (cable),
-                 taper_fraction: 0.15 (muscle), frequency_hz, contraction_s, release_s, start_delay_s}
+                 taper_fraction: 0.15, desired_radius: proportional|constant_depth (muscle),
+                 frequency_hz, contraction_s, release_s, start_delay_s}
     terms:      {viscosity, drag, added_mass, jet, vehicle_motion: all true}
     load:       {internal_pressure_pa: 0}   (static pressure load, for tests)
     initial:    {radial_perturbation_m: 0}  (r += d sin(pi X/L) at t = 0)
@@ -108,11 +122,14 @@ from pulsejet_sim.models.shell_geometry import Profile, build_profile
 
 _KERNELS: dict = {}
 INTEGRATORS = {'verlet': (0, 1.0), 'implicit_midpoint': (1, 0.5), 'backward_euler': (1, 1.0)}
-SECTIONS = ('model', 'name', 'description', 'simulation', 'geometry', 'mesh', 'material', 'fluid',
+SECTIONS = ('model', 'name', 'description', 'coupling', 'simulation', 'geometry', 'mesh', 'material', 'fluid',
             'vehicle', 'jet', 'actuation', 'terms', 'initial', 'load')
 TERMS = {'viscosity': True, 'drag': True, 'added_mass': True, 'jet': True, 'vehicle_motion': True}
 ACTUATION_KINDS = ('none', 'cable', 'muscle')
 DISTRIBUTIONS = ('uniform', 'rising', 'falling')
+COUPLINGS = ('consistent', 'paper')
+OUTLETS = ('ring', 'edge')
+DESIRED_RADIUS = ('proportional', 'constant_depth')
 ERR_TEXT = {
     sk.ERR_NONFINITE: 'non-finite state (NaN/inf)',
     sk.ERR_AXIS: 'the mantle wall crossed the symmetry axis (r < 0): the collapse is too deep for this '
@@ -164,6 +181,28 @@ def _unknown(sec, where, allowed):
             raise ModelError(f'{where}.{k}: unknown key (value {sec[k]!r}); allowed: {", ".join(allowed)}')
 
 
+def muscle_shape(desired: str, Xm: np.ndarray, r0m: np.ndarray, taper: float, amp: float) -> np.ndarray:
+    """Per element, the drop of the desired hoop stretch at full activation over ``amp``:
+    ``tau_d = 1 - amp a(t) s_e``.
+
+    ``proportional``: the desired radius is ``(1 - amp a s(X)) r0``, a uniform fraction of the rest
+    radius.  ``constant_depth`` (our reading of paper 000's Fig. 12, whose curves are lost: "the desired
+    radius function is linear (constant) for most of the mantle profile and thus more attuned with the
+    linear conical profile"): the desired radius is the rest profile moved inwards by the same depth
+    ``amp a(t) max(r0) s(X)`` everywhere, so on a cone it is again a straight line parallel to the wall,
+    and on an ellipsoid it is the ellipse moved inwards; the hoop strain it asks for is then largest
+    where the mantle is narrow, capped at a desired stretch of 0.05.  ``s(X)`` is 1 over the mantle
+    and falls smoothly to 0 over ``taper`` of the meridian at the pole and at the edge."""
+    def smooth(x):
+        x = np.clip(x, 0.0, 1.0)
+        return x * x * (3 - 2 * x)
+    s = smooth(Xm / taper) * smooth((1 - Xm) / taper)
+    if desired == 'proportional':
+        return s
+    depth = s * float(r0m.max()) / r0m
+    return np.minimum(depth, 0.95 / amp) if amp > 0 else depth
+
+
 class ShellModel:
     """Axisymmetric Reissner shell mantle + jet + vehicle (implements the Model protocol)."""
 
@@ -210,9 +249,16 @@ class ShellModel:
                                  f'{", ".join(SECTIONS)}')
         if scene.get('model', 'shell') != 'shell':
             raise ModelError(f'model: {scene.get("model")!r} is not the shell model; allowed: shell')
+        coupling = scene.get('coupling', 'consistent')
+        if coupling not in COUPLINGS:
+            raise ModelError(f'coupling: {coupling!r} is not known; allowed: one of {", ".join(COUPLINGS)}')
+        paper = coupling == 'paper'
         sim = _section(scene, 'simulation')
         dt = _num(sim, 'dt_s', 'simulation', 0.0, 0.1, low_open=True)
         integrator = _choice(sim, 'integrator', 'simulation', tuple(INTEGRATORS), 'implicit_midpoint')
+        if paper and integrator == 'verlet':
+            raise ModelError("simulation.integrator: 'verlet' is not available with coupling: paper; allowed: "
+                             "implicit_midpoint or backward_euler")
         duration = _num(sim, 'duration_s', 'simulation', 0.0, 1e6, default=10.0)
         tol = _num(sim, 'newton_tolerance', 'simulation', 1e-14, 1e-4, default=1e-9)
         spec = sim.get('specialise_kernel', False)
@@ -261,9 +307,15 @@ class ShellModel:
         Cd = _num(fl, 'drag_coefficient', 'fluid', 0.0, 10.0, default=1.0)
 
         jet = _section(scene, 'jet', required=terms['jet'])
-        _unknown(jet, 'jet', ('outlet_radius_m', 'inlet_area_m2', 'thrust_coefficient'))
+        _unknown(jet, 'jet', ('outlet', 'outlet_radius_m', 'inlet_area_m2', 'thrust_coefficient'))
+        outlet = _choice(jet, 'outlet', 'jet', OUTLETS, 'edge' if paper else 'ring')
         rring = profile.ring_radius_m
-        r_out = _num(jet, 'outlet_radius_m', 'jet', 1e-4, rring, default=0.5 * rring)
+        if outlet == 'edge':
+            if 'outlet_radius_m' in jet:
+                raise ModelError(f'jet.outlet_radius_m: {jet["outlet_radius_m"]!r} is not used with outlet: edge '
+                                 f'(the outlet is the mantle edge, radius {rring:.4g} m at rest); allowed: leave it '
+                                 f'out, or outlet: ring')
+        r_out = rring if outlet == 'edge' else _num(jet, 'outlet_radius_m', 'jet', 1e-4, rring, default=0.5 * rring)
         A_out = math.pi * r_out ** 2
         A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01 ** 2)
         Cf = _num(jet, 'thrust_coefficient', 'jet', 0.0, 2.0, default=1.0)
@@ -323,6 +375,14 @@ class ShellModel:
         Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXZ] = Nd[-1, sk.N_FIXT] = 1.0
         free = np.ones(n1, bool)
         free[0] = free[-1] = False
+        if outlet == 'edge':
+            # paper 000, "at the boundary overlooking the rigid cap ... a static condition": the edge
+            # carries no prescribed radius or angle (zero wrench), only its axial place on the body
+            Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXT] = 0.0
+            # its axial place is the body's: no r-z coupling of the added mass at that node (the
+            # residual would otherwise pull the vehicle speed held in the ring's axial slot into r)
+            Nd[-1, sk.N_MRZ] = 0.0
+            free[-1] = True
         shell_free_mass = float(m[:-1].sum())
 
         # ---- vehicle
@@ -336,6 +396,10 @@ class ShellModel:
 
         # ---- actuation
         flags = 0
+        if paper:
+            flags |= sk.F_PAPER
+        if outlet == 'edge':
+            flags |= sk.F_EDGE
         if terms['viscosity'] and eta_v > 0:
             flags |= sk.F_VISC
         if terms['drag']:
@@ -349,7 +413,7 @@ class ShellModel:
         actuation = {'kind': akind, 'source': 'none'}
         if akind != 'none':
             common = ('kind', 'source', 'amplitude', 'frequency_hz', 'contraction_s', 'release_s', 'start_delay_s')
-            extra = ('distribution',) if akind == 'cable' else ('taper_fraction',)
+            extra = ('distribution',) if akind == 'cable' else ('taper_fraction', 'desired_radius')
             _unknown(act, 'actuation', common + extra)
             src = _choice(act, 'source', 'actuation', ('routine', 'command') if akind == 'cable' else ('routine',),
                           'routine')
@@ -370,12 +434,10 @@ class ShellModel:
                 flags |= sk.F_MUSCLE
                 amp = _num(act, 'amplitude', 'actuation', 0.0, 0.95)
                 taper = _num(act, 'taper_fraction', 'actuation', 0.01, 0.5, default=0.15)
-
-                def smooth(x):
-                    x = np.clip(x, 0.0, 1.0)
-                    return x * x * (3 - 2 * x)
-                E[:, sk.E_SMUS] = smooth(Xm / taper) * smooth((1 - Xm) / taper)
+                desired = _choice(act, 'desired_radius', 'actuation', DESIRED_RADIUS, 'proportional')
+                E[:, sk.E_SMUS] = muscle_shape(desired, Xm, r0m, taper, amp)
                 actuation['taper_fraction'] = taper
+                actuation['desired_radius'] = desired
             if src == 'routine':
                 flags |= sk.F_ROUTINE
                 freq = _num(act, 'frequency_hz', 'actuation', 0.0, 100.0, low_open=True)
@@ -405,6 +467,7 @@ class ShellModel:
         P[sk.P_CT] = Ct
         P[sk.P_CD] = Cd
         P[sk.P_MBODY] = payload + mx
+        P[sk.P_MSHELL] = shell_free_mass
         P[sk.P_AMP] = amp
         P[sk.P_FREQ] = freq
         P[sk.P_TC] = tc
@@ -430,6 +493,8 @@ class ShellModel:
                     actuation=actuation, initial_perturbation_m=pert, initial_velocity_m_s=U0,
                     duration_s=duration)
         model.specialise_kernel = spec
+        model.coupling = coupling
+        model.outlet = outlet
         model.material = dict(youngs_modulus_pa=Ey, viscosity_pa_s=eta_v, poisson_ratio=nu, half_thickness_m=h,
                               density_kg_m3=rho_s)
         # ---- refuse what cannot run
@@ -467,8 +532,9 @@ class ShellModel:
         U0 = self.initial_velocity_m_s if self.flags & sk.F_BODY else 0.0
         s[tail + sk.S_U] = U0
         v = s[3 * n1:6 * n1].reshape(n1, 3)
-        v[1:-1, 1] = U0   # wall moving with the vehicle (absolute axial velocity)
-        v[0, 1] = U0
+        if not self.flags & sk.F_PAPER:
+            v[1:-1, 1] = U0   # wall moving with the vehicle (absolute axial velocity)
+            v[0, 1] = U0
         s[tail + sk.S_VOL] = self.ref.volume_m3()
         return s
 
@@ -605,14 +671,18 @@ class ShellModel:
         n1 = self.n_nodes
         st, _, _, kint = self._eval(state)
         v = state[3 * n1:6 * n1].reshape(n1, 3).copy()
-        v[0, 0] = v[0, 2] = 0.0
-        v[-1, :] = 0.0
+        v[:, 0] *= 1.0 - self.Nd[:, sk.N_FIXR]
+        v[:, 1] *= 1.0 - self.Nd[:, sk.N_FIXZ]
+        v[:, 2] *= 1.0 - self.Nd[:, sk.N_FIXT]
         U = float(state[6 * n1 + sk.S_U])
         k_own = 0.5 * float(np.sum(self.node_mass * (v[:, 0] ** 2 + v[:, 1] ** 2)
                                    + self.Nd[:, sk.N_MTT] * v[:, 2] ** 2))
         vn = v[:, 0] * self.n0[:, 0] + v[:, 1] * self.n0[:, 1]
         k_am = 0.5 * float(np.sum(self.node_added_mass * vn ** 2))
         k_veh = 0.5 * self.payload_kg * U * U + k_own
+        if self.flags & sk.F_PAPER:
+            # node velocities are relative to the body: the vehicle carries the shell's own mass
+            k_veh += 0.5 * float(self.P[sk.P_MSHELL]) * U * U
         k_out = 0.5 * self.body_added_mass_kg * U * U + k_am
         el = float(st[sk.T_EEL])
         return el + k_veh + k_out + float(kint), el, k_veh, k_out, float(kint)
@@ -627,7 +697,11 @@ class ShellModel:
             'out_viscous': float(T[sk.S_VISC]), 'out_other': float(T[sk.S_OTHER]),
         }
         out = led['out_jet_kinetic'] + led['out_drag'] + led['out_viscous'] + led['out_other']
-        err = tot - led['in_initial'] - led['in_actuation_work'] + out
+        created = 0.0
+        if self.flags & sk.F_PAPER:
+            # not an input: the energy the paper's equations create, named (docs/PHYSICS_SHELL.md)
+            created = led['created_unpaid_jet_kinetic'] = float(T[sk.S_CREATED])
+        err = tot - led['in_initial'] - led['in_actuation_work'] + out - created
         led['closure_error'] = float(err)
         led['closure_relative'] = float(err / max(led['in_initial'] + led['in_actuation_work'], 1e-300))
         return led

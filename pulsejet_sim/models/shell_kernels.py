@@ -48,6 +48,12 @@ F_BODY = 8
 F_CABLE = 16
 F_MUSCLE = 32
 F_ROUTINE = 64
+# paper 000's coupling (section 3, Fig. 5): the shell is solved in the body frame with only drag and
+# added mass from the water (no cavity pressure on the wall), and the vehicle is driven by the jet
+# thrust alone; the vehicle velocity enters only the kinematics (the position update)
+F_PAPER = 128
+# the outlet is the mantle's own free edge: A_out(t) = pi r_edge(t)^2 (paper 000 section 5)
+F_EDGE = 256
 
 # ---- parameter vector P ---------------------------------------------------------------------
 P_PSI, P_PSI2, P_JS, P_GS, P_GV, P_NU = 0, 1, 2, 3, 4, 5
@@ -58,7 +64,8 @@ P_PSTAT = 26   # static gauge pressure load on the inner surface (test/load scen
 P_HC, P_KC = 27, 28   # axis contact: radius where the inner faces meet, penalty stiffness per area
 P_VSCALE = 29         # Newton velocity scale: shortest element / dt (converged when a step moves a
                       # node by less than newton_tolerance times the shortest element)
-N_PARAMS = 30
+P_MSHELL = 30        # mass of the moving shell, kg (carried by the vehicle in the paper coupling)
+N_PARAMS = 31
 
 # ---- element table E[e, :] -------------------------------------------------------------------
 E_DS, E_R0M, E_LAM0, E_ETA0, E_K0, E_VS0, E_SMUS, E_AREA = 0, 1, 2, 3, 4, 5, 6, 7
@@ -72,11 +79,13 @@ N_NCOLS = 10
 S_X, S_U, S_A, S_IN, S_JET, S_DRAG, S_VISC, S_OTHER = 0, 1, 2, 3, 4, 5, 6, 7
 S_THR, S_BDRAG, S_UJ, S_P, S_VOL, S_VDOT, S_TIME = 8, 9, 10, 11, 12, 13, 14
 S_NIT, S_NJAC = 15, 16   # cumulative Newton iterations and Jacobian factorisations (diagnostics)
-N_TAIL = 17
+S_CREATED = 17           # paper coupling: the jet's kinetic energy that no wall force pays for, J
+N_TAIL = 18
 
 # ---- stats returned by the force evaluation -------------------------------------------------
 T_EEL, T_PVISC, T_PDRAG, T_VOL, T_VDOT, T_P, T_PACT, T_FRING, T_RMAX, T_PCONT = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
-N_STATS = 10
+T_AOUT = 10   # outlet area, m^2
+N_STATS = 11
 
 # blow-up codes
 OK, ERR_NONFINITE, ERR_AXIS, ERR_BOUNDS, ERR_NEWTON = 0, 1, 2, 3, 4
@@ -224,7 +233,16 @@ def volume_grad(q, n1, g):
 
 
 @njit(cache=True)
-def jet_terms(Vdot, U, P):
+def outlet_area(flags, q, n1, P):
+    """Outlet area, m^2: the fixed ``A_out``, or pi r_edge^2 when the free edge is the nozzle."""
+    if flags & F_EDGE:
+        r = q[3 * (n1 - 1)]
+        return math.pi * r * r
+    return P[P_AOUT]
+
+
+@njit(cache=True)
+def jet_terms(Vdot, U, P, A_out):
     """Jet model: returns (p, u_j, thrust, ram, P_jet_out, P_other).
 
     Outflow (V' < 0): u_j = -V'/A_out, p = rho u_j^2 / 2 on the inner surface (the shell pays the
@@ -234,7 +252,7 @@ def jet_terms(Vdot, U, P):
     ram loss of bringing the ingested water to the vehicle speed (ram force rho V' U) mix away."""
     rho = P[P_RHO]
     if Vdot < 0.0:
-        A = P[P_AOUT]
+        A = A_out
         u = -Vdot / A
         p = 0.5 * rho * u * u
         thr = P[P_CF] * rho * A * u * u
@@ -334,8 +352,9 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
     for k in range(n):
         Vdot += gV[k] * vrel[k]
     p = 0.0
-    if flags & F_JET:
-        p, uj, thr, ram, pj, po = jet_terms(Vdot, U, P)
+    aout = outlet_area(flags, q, n1, P)
+    if (flags & F_JET) and not (flags & F_PAPER):
+        p, uj, thr, ram, pj, po = jet_terms(Vdot, U, P, aout)
     pst = P[P_PSTAT]
     if pst != 0.0:
         # static load: potential -p_s V, its work p_s V' is booked as input
@@ -357,23 +376,32 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
     st[T_FRING] = F[3 * (n1 - 1) + 1]
     st[T_RMAX] = rmax
     st[T_PCONT] = pcont
+    st[T_AOUT] = aout
 
 
 @njit(cache=True)
 def body_terms(flags, st, U, P):
-    """Vehicle: returns (accel, thrust, body drag (signed, opposes U), ram, P_jet_out, P_other, m)."""
+    """Vehicle: returns (accel, thrust, body drag (signed, opposes U), ram, P_jet_out, P_other, m).
+
+    In the paper coupling the vehicle carries the shell's mass too (the shell is solved in the body
+    frame) and feels no force from the clamped ring: only thrust, drag and the ram of the inflow."""
     rho = P[P_RHO]
     thr = 0.0; ram = 0.0; pj = 0.0; po = 0.0
+    m = P[P_MBODY]
+    if flags & F_PAPER:
+        m += P[P_MSHELL]
     if flags & F_JET:
-        p, uj, thr, ram, pj, po = jet_terms(st[T_VDOT], U, P)
-        m = P[P_MBODY] + rho * st[T_VOL]
+        p, uj, thr, ram, pj, po = jet_terms(st[T_VDOT], U, P, st[T_AOUT])
+        m += rho * st[T_VOL]
     else:
-        m = P[P_MBODY] + rho * P[P_V0]
+        m += rho * P[P_V0]
     drag = 0.0
     if flags & F_DRAG:
         drag = -0.5 * P[P_CD] * rho * math.pi * st[T_RMAX] * st[T_RMAX] * abs(U) * U
     acc = 0.0
-    if flags & F_BODY:
+    if flags & F_PAPER:
+        acc = (thr + drag - ram) / m
+    elif flags & F_BODY:
         acc = (thr + drag - ram + st[T_FRING]) / m
     return acc, thr, drag, ram, pj, po, m
 
@@ -413,6 +441,8 @@ def kinetic(Nd, v, U, P, V, flags):
         ksh += 0.5 * (Nd[i, N_MRR] * vr * vr + 2 * Nd[i, N_MRZ] * vr * vz + Nd[i, N_MZZ] * vz * vz
                       + Nd[i, N_MTT] * vt * vt)
     kveh = 0.5 * P[P_MBODY] * U * U
+    if flags & F_PAPER:
+        kveh += 0.5 * P[P_MSHELL] * U * U   # node velocities are relative to the body here
     if flags & F_JET:
         kint = 0.5 * P[P_RHO] * V * U * U
     else:
@@ -557,6 +587,26 @@ def _check(q, v, n1, P):
 
 
 @njit(cache=True)
+def _paper_vehicle_midpoint(flags, st, U, alpha, dt, P):
+    """Paper coupling: the vehicle's midpoint speed U* of m (U* - U)/alpha = dt (T - D(U*) - ram(U*)),
+    with the thrust T of the shell's midpoint state (the shell does not feel U); scalar Newton."""
+    Us = U
+    for _ in range(20):
+        a, thr, dr, ram, pj, po, m = body_terms(flags, st, Us, P)
+        g = m * (Us - U) / alpha - dt * (thr + dr - ram)
+        dg = m / alpha
+        if flags & F_DRAG:
+            dg += dt * P[P_CD] * P[P_RHO] * math.pi * st[T_RMAX] * st[T_RMAX] * abs(Us)
+        if flags & F_JET:
+            dg += dt * P[P_RHO] * max(st[T_VDOT], 0.0)
+        step = g / dg
+        Us -= step
+        if abs(step) <= 1e-14 * (1.0 + abs(Us)):
+            break
+    return Us
+
+
+@njit(cache=True)
 def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     n1 = Nd.shape[0]
     n = 3 * n1
@@ -628,7 +678,8 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             # The vehicle's midpoint speed U* is solved together with the shell (monolithic):
             # it takes the slot of the clamped ring's axial dof (rz), which keeps the system banded
             # because, by translation invariance, dF/dU* = alpha dt K[:, rz] + C[:, rz].
-            body = (flags & F_BODY) != 0
+            # monolithic vehicle only in the consistent coupling (the paper's is solved after the shell)
+            body = (flags & F_BODY) != 0 and (flags & F_PAPER) == 0
             rz = 3 * (n1 - 1) + 1
             Us = U + alpha * dt * state[tail + S_A]
             if not body:
@@ -686,9 +737,9 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     have_lu = False     # even short steps fail: the Jacobian is stale
                 rprev = rnorm
                 lam = 1.0
-                if have_lu and (flags & F_JET):
+                if have_lu and (flags & F_JET) and not (flags & F_PAPER):
                     # refresh the rank-one pressure correction for the reused factorisation
-                    Aj = P[P_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
+                    Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
                     pcoef = dt * P[P_RHO] * abs(st[T_VDOT]) / (Aj * Aj)
                     band_solve(J, n, BW, gf, zz)
                 if not have_lu:
@@ -723,8 +774,8 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         return step, ERR_NEWTON
                     # pressure rank one: + dt rho |V'|/A^2 g g^T
                     pcoef = 0.0
-                    if flags & F_JET:
-                        Aj = P[P_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
+                    if (flags & F_JET) and not (flags & F_PAPER):
+                        Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
                         pcoef = dt * P[P_RHO] * abs(st[T_VDOT]) / (Aj * Aj)
                         band_solve(J, n, BW, gf, zz)
                     have_lu = True
@@ -765,10 +816,23 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                 q1[3 * i + 1] = qn[3 * i + 1] + alpha * dt * (vs[3 * i + 1] - Us) * (1.0 - Nd[i, N_FIXZ])
                 q1[3 * i + 2] = qn[3 * i + 2] + alpha * dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
             forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
-            acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
+            Ush = Us     # the frame speed the shell's kinematics use (0 in the paper coupling)
+            if flags & F_PAPER:
+                if flags & F_BODY:
+                    Us = _paper_vehicle_midpoint(flags, st, U, alpha, dt, P)
+                acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
+                # what the consistent wall pressure (suction on inflow) would have charged the
+                # shell: the kinetic energy flux of the jet in the body frame, 1/2 rho A |u|^3
+                # (docs/PHYSICS_SHELL.md, "The ledger of the paper coupling")
+                if flags & F_JET:
+                    aj_ = st[T_AOUT] if st[T_VDOT] < 0.0 else P[P_AIN]
+                    uj_ = abs(st[T_VDOT]) / aj_
+                    state[tail + S_CREATED] += dt * 0.5 * P[P_RHO] * aj_ * uj_ * uj_ * uj_
+            else:
+                acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
             for i in range(n1):
                 q1[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
-                q1[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Us) * (1.0 - Nd[i, N_FIXZ])
+                q1[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Ush) * (1.0 - Nd[i, N_FIXZ])
                 q1[3 * i + 2] = qn[3 * i + 2] + dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
             for k in range(n):
                 v1[k] = 0.0 if fixed_dof(Nd, k) else vn[k] + (vs[k] - vn[k]) / alpha
@@ -800,7 +864,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
         state[tail + S_VDOT] = vdot
         state[tail + S_TIME] = t + dt
         if flags & F_JET:
-            state[tail + S_UJ] = -vdot / (P[P_AOUT] if vdot < 0 else P[P_AIN])
+            state[tail + S_UJ] = -vdot / (st[T_AOUT] if vdot < 0 else P[P_AIN])
     return n_steps, OK
 
 
@@ -831,7 +895,8 @@ def evaluate(flags, state, t, amp_cmd, E, Nd, P):
     vrel = np.zeros(n)
     st = np.zeros(N_STATS)
     U = state[6 * n1 + S_U]
-    forces(flags, state[:n], state[n:2 * n], U, t, amp_cmd, E, Nd, P, F, gV, vrel, st)
+    Ush = 0.0 if flags & F_PAPER else U   # the paper coupling's shell lives in the body frame
+    forces(flags, state[:n], state[n:2 * n], Ush, t, amp_cmd, E, Nd, P, F, gV, vrel, st)
     ksh, kveh, kint = kinetic(Nd, state[n:2 * n], U, P, st[T_VOL], flags)
     return st, ksh, kveh, kint
 
@@ -845,7 +910,7 @@ def stiffness_damping(flags, state, t, E, Nd, P):
     gV = np.zeros(n)
     vrel = np.zeros(n)
     st = np.zeros(N_STATS)
-    U = state[6 * n1 + S_U]
+    U = 0.0 if flags & F_PAPER else state[6 * n1 + S_U]
     forces(flags, state[:n], state[n:2 * n], U, t, 0.0, E, Nd, P, F, gV, vrel, st)
     K = np.zeros((n, 2 * BW + 1))
     C = np.zeros((n, 2 * BW + 1))

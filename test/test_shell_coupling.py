@@ -1,0 +1,114 @@
+"""The shell's two couplings (paper 000's and the energy-consistent one), the mantle-edge nozzle and
+the muscle's desired-radius functions: what each option does, its ledger, and its refusals."""
+import math
+
+import numpy as np
+import pytest
+
+from pulsejet_sim.models import shell_kernels as sk
+from pulsejet_sim.models.base import Command, ModelError
+from pulsejet_sim.models.shell import ShellModel
+
+
+def cone_scene(coupling='paper', dt=1e-3, elements=24, mass=0.335, actuation=None, jet=None, **extra):
+    scene = dict(
+        model='shell', coupling=coupling, simulation=dict(dt_s=dt, integrator='implicit_midpoint'),
+        geometry=dict(kind='cone', length_m=0.16, base_radius_m=0.03, tip_radius_m=0.006),
+        mesh=dict(elements=elements),
+        material=dict(youngs_modulus_pa=40e3, viscosity_pa_s=500.0, poisson_ratio=0.0, half_thickness_m=1e-3,
+                      density_kg_m3=1100.0),
+        fluid=dict(density_kg_m3=1022.0, added_mass_coefficient=1.1, tangential_drag_coefficient=0.05,
+                   drag_coefficient=1.7),
+        jet=jet if jet is not None else dict(outlet='edge', thrust_coefficient=1.0),
+        vehicle=dict(mass_kg=mass),
+        actuation=actuation or dict(kind='cable', source='routine', amplitude=6.0, distribution='rising',
+                                    frequency_hz=1.5, contraction_s=0.2, release_s=0.3))
+    scene.update(extra)
+    return scene
+
+
+def run(model, duration_s):
+    state = model.initial_state()
+    n = int(round(duration_s / model.dt_s))
+    model.advance(state, 0.0, n, Command())
+    return state
+
+
+@pytest.mark.parametrize('coupling', ['paper', 'consistent'])
+def test_ledger_closes_at_second_order_and_names_what_the_paper_creates(coupling):
+    closures = []
+    for dt in (2e-3, 1e-3):
+        model = ShellModel.from_scene(cone_scene(coupling, dt))
+        led = model.energy_ledger(run(model, 0.6))
+        closures.append(abs(led['closure_relative']))
+        assert not any(k.startswith('in_') and k not in ('in_initial', 'in_actuation_work') for k in led)
+        if coupling == 'paper':
+            # the wall pays nothing for the jet: its kinetic energy flux is booked as created, never as input
+            assert led['created_unpaid_jet_kinetic'] > 0.05 * led['in_actuation_work'], led
+        else:
+            assert 'created_unpaid_jet_kinetic' not in led
+    assert closures[0] < 1e-3, closures
+    assert closures[0] / max(closures[1], 1e-15) > 3.0, closures     # second order in the step
+
+
+def test_paper_shell_does_not_feel_the_vehicle_consistent_one_does():
+    """Paper 000 section 3.3: the vehicle velocity "has been used only for the kinematics equation":
+    the shell's motion must not depend on the vehicle's mass (hence speed); in the consistent coupling
+    it does (the shell's drag, inertia and the ring force see the vehicle)."""
+    def profile(coupling, mass):
+        model = ShellModel.from_scene(cone_scene(coupling, mass=mass))
+        state = run(model, 0.4)
+        return np.concatenate(model.profile(state)), state[6 * model.n_nodes + sk.S_U]
+    (p_light, u_light), (p_heavy, u_heavy) = profile('paper', 0.335), profile('paper', 3.35)
+    assert np.array_equal(p_light, p_heavy)
+    assert u_light > 2.0 * u_heavy > 0.0
+    (c_light, _), (c_heavy, _) = profile('consistent', 0.335), profile('consistent', 3.35)
+    assert np.max(np.abs(c_light - c_heavy)) > 1e-7
+
+
+def test_edge_nozzle_area_follows_the_mantle_edge():
+    model = ShellModel.from_scene(cone_scene('paper', actuation=dict(
+        kind='cable', source='routine', amplitude=6.0, distribution='rising', frequency_hz=1.5,
+        contraction_s=0.2, release_s=0.3)))
+    state = run(model, 0.15)        # mid-contraction: the rising pull narrows the edge
+    r, _ = model.profile(state)
+    assert r[-1] < 0.95 * 0.03
+    obs = model.observe(state, 0.15, Command())
+    vdot = state[6 * model.n_nodes + sk.S_VDOT]
+    area = -vdot / obs.jet_speed_m_s        # the outlet area the jet used (at the step's midpoint)
+    assert area == pytest.approx(math.pi * r[-1] ** 2, rel=0.02)
+    assert area < 0.95 ** 2 * math.pi * 0.03 ** 2
+    assert obs.thrust_n == pytest.approx(1022.0 * vdot ** 2 / area, rel=1e-9)
+
+
+def test_rigid_ring_outlet_keeps_the_ring_clamped():
+    model = ShellModel.from_scene(cone_scene('consistent', jet=dict(outlet='ring', outlet_radius_m=0.0125)))
+    r, _ = model.profile(run(model, 0.15))
+    assert r[-1] == 0.03
+
+
+@pytest.mark.parametrize('scene, message', [
+    (cone_scene(coupling='loose'), "coupling: 'loose' is not known; allowed: one of consistent, paper"),
+    (cone_scene(jet=dict(outlet='edge', outlet_radius_m=0.01)), 'jet.outlet_radius_m: 0.01 is not used with outlet: edge'),
+    (cone_scene(jet=dict(outlet='nozzle')), "jet.outlet: 'nozzle' is not known; allowed: one of ring, edge"),
+    (cone_scene(simulation=dict(dt_s=1e-6, integrator='verlet')), "'verlet' is not available with coupling: paper"),
+])
+def test_bad_coupling_options_are_refused_with_the_value(scene, message):
+    with pytest.raises(ModelError, match=message.replace('(', r'\(').replace(')', r'\)')):
+        ShellModel.from_scene(scene)
+
+
+def test_constant_depth_muscle_moves_the_cone_inwards_by_one_depth():
+    """Our reading of Fig. 12: the desired radius is the rest profile moved inwards by one depth
+    (a line parallel to the cone's wall) over the middle of the mantle."""
+    muscle = dict(kind='muscle', source='routine', amplitude=0.25, desired_radius='constant_depth',
+                  taper_fraction=0.15, frequency_hz=1.5, contraction_s=0.2, release_s=0.3)
+    model = ShellModel.from_scene(cone_scene('paper', actuation=muscle))
+    r0m = model.E[:, sk.E_R0M]
+    depth = 0.25 * model.E[:, sk.E_SMUS] * r0m          # r0 - r_desired at full activation
+    xm = (np.arange(len(r0m)) + 0.5) / len(r0m)
+    middle = (xm > 0.3) & (xm < 0.7)
+    assert np.allclose(depth[middle], 0.25 * r0m.max(), rtol=1e-12)
+    assert np.all(1.0 - 0.25 * model.E[:, sk.E_SMUS] >= 0.05 - 1e-12)   # capped where the cone is narrow
+    proportional = ShellModel.from_scene(cone_scene('paper', actuation={**muscle, 'desired_radius': 'proportional'}))
+    assert np.allclose(proportional.E[middle, sk.E_SMUS], 1.0)
