@@ -1,0 +1,158 @@
+"""Paper 000's study (section 5: 36 external + 18 internal actuation runs) in both couplings, which
+of the paper's five qualitative findings each coupling reproduces, and the resolution of every run.
+Not a test (about 10 minutes on 2 cores): writes benchmarks/results/paper000_study/
+{study.csv, refined.csv, study.png, README.md}.
+
+    .venv/bin/python benchmarks/paper000_study.py
+
+The findings are checked by the rules in `findings` below, fixed before the study first ran; the
+study's values are in config/sweeps/paper000_study.yaml, chosen once with their reasons there.
+`study.csv` holds only deterministic columns, so a rerun reproduces it bit for bit (the test
+`test/test_paper000_study.py` reruns one case and compares it with its stored row).
+"""
+from __future__ import annotations
+
+import csv
+import datetime
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from pulsejet_sim.sweep import RunSpec, load_sweep, merge, plot_bars, run_sweep  # noqa: E402
+
+OUT = Path(__file__).resolve().parent / 'results' / 'paper000_study'
+SWEEP = 'paper000_study'
+COLUMNS = ('peak_speed_m_s', 'mean_speed_m_s', 'distance_m', 'peak_thrust_n', 'volume_min_m3', 'volume_max_m3',
+           'closure_relative')
+REFINED = {'mesh': {'elements': 192}, 'simulation': {'dt_s': 2.5e-4}}   # twice the elements, half the step
+CONVERGED = 0.02          # a run's peak speed within 2 % of the refined run's
+SPREAD_ALMOST_NONE = 1.15  # "almost independent of the routine": fastest/slowest routine <= 1.15
+DOUBLES = 1.8              # "doubling": fastest/slowest routine >= 1.8
+
+
+def speed(row) -> float:
+    return row['peak_speed_m_s']
+
+
+def select(rows, **labels):
+    return [r for r in rows if all(r[k] == v for k, v in labels.items())]
+
+
+def stiffest(rows) -> str:
+    return max({r['stiffness'] for r in rows}, key=lambda s: float(s[1:-1]))
+
+
+def findings(rows: list[dict]) -> list[tuple[str, str, bool, str]]:
+    """(claim, where in paper 000, reproduced?, what the runs show) for rows of one coupling."""
+    ext = [r for r in rows if r['study'] == 'external']
+    inn = [r for r in rows if r['study'] == 'internal']
+    out = []
+    top3 = sorted(ext, key=speed, reverse=True)[:3]
+    ok = all(r['mantle'] == 'ellipsoid' and r['stiffness'] == stiffest(ext) for r in top3)
+    out.append(('external: the ellipsoid with the highest stiffness gives the three highest peaks',
+                '5.1, bar plot of the 36 runs', ok, 'top three: ' + ', '.join(f'{r["label"]} {speed(r):.3g} m/s' for r in top3)))
+    ratios = {}
+    for mantle in ('cone', 'ellipsoid'):
+        values = []
+        for r in select(ext, mantle=mantle, distribution='rising'):
+            twin = select(ext, mantle=mantle, distribution='falling', stiffness=r['stiffness'], routine=r['routine'])[0]
+            values.append(max(speed(r), speed(twin)) / min(speed(r), speed(twin)))
+        ratios[mantle] = sum(values) / len(values)
+    ok = ratios['ellipsoid'] - 1.0 > 2.0 * (ratios['cone'] - 1.0)
+    out.append(('external: the spatial distribution matters much more for the ellipsoid than for the cone',
+                '5.1, Fig. 11', ok, f'mean faster/slower ratio of the two distributions: ellipsoid '
+                f'{ratios["ellipsoid"]:.2f}, cone {ratios["cone"]:.2f} (rule: ellipsoid - 1 > 2 (cone - 1))'))
+    best = max(inn, key=speed)
+    ok = best['mantle'] == 'cone' and best['stiffness'] == stiffest(inn)
+    out.append(('internal: the conical mantle with high stiffness is best', '5.2, Fig. 13', ok,
+                f'best: {best["label"]} {speed(best):.3g} m/s'))
+    spreads = {}
+    for mantle in ('ellipsoid', 'cone'):
+        for stiffness in sorted({r['stiffness'] for r in inn}):
+            values = sorted(speed(r) for r in select(inn, mantle=mantle, stiffness=stiffness))
+            spreads[mantle, stiffness] = values[-1] / values[0]
+    ell = {s: x for (m, s), x in spreads.items() if m == 'ellipsoid'}
+    cone = {s: x for (m, s), x in spreads.items() if m == 'cone'}
+    out.append(('internal: one ellipsoid routine resonates and doubles the speed', '5.2, Fig. 17 (test 9)',
+                any(x >= DOUBLES for x in ell.values()),
+                'fastest/slowest routine: ' + ', '.join(f'{s} {x:.2f}' for s, x in ell.items())
+                + f' (rule: some >= {DOUBLES})'))
+    out.append(('internal: the cone is almost independent of the routine', '5.2, Fig. 17',
+                all(x <= SPREAD_ALMOST_NONE for x in cone.values()),
+                'fastest/slowest routine: ' + ', '.join(f'{s} {x:.2f}' for s, x in cone.items())
+                + f' (rule: all <= {SPREAD_ALMOST_NONE})'))
+    return out
+
+
+def as_rows(specs: list[RunSpec], results) -> list[dict]:
+    rows = []
+    for spec, res in zip(specs, results):
+        labels = dict(spec.labels)
+        row = {'run': spec.name, 'study': spec.study, 'label': '/'.join(v for k, v in spec.labels if k != 'coupling'),
+               'fault': res.fault, **labels}
+        row.update({c: res.metrics.get(c, float('nan')) for c in COLUMNS})
+        rows.append(row)
+    return rows
+
+
+def write_table(rows: list[dict], path: Path) -> None:
+    keys = ['run', 'study', 'coupling', 'mantle', 'stiffness', 'routine', 'distribution', *COLUMNS, 'fault']
+    with open(path, 'w', newline='') as fh:
+        writer = csv.writer(fh, lineterminator='\n')
+        writer.writerow(keys)
+        for r in rows:
+            writer.writerow([repr(r[k]) if isinstance(r.get(k), float) else r.get(k, '') for k in keys])
+
+
+def refined(spec: RunSpec) -> RunSpec:
+    return RunSpec(spec.study, spec.labels, spec.scene, merge(dict(spec.overrides), REFINED), spec.duration_s,
+                   spec.replace)
+
+
+def main() -> int:
+    meta, specs = load_sweep(SWEEP)
+    start = time.perf_counter()
+    results = run_sweep(specs)
+    fine = run_sweep([refined(s) for s in specs])
+    wall = time.perf_counter() - start
+    rows = as_rows(specs, results)
+    fine_rows = as_rows(specs, fine)
+    OUT.mkdir(parents=True, exist_ok=True)
+    write_table(rows, OUT / 'study.csv')
+    write_table(fine_rows, OUT / 'refined.csv')
+    plot_bars(results, meta['metric'], OUT / 'study.png')
+    errors = [abs(speed(r) / speed(f) - 1.0) for r, f in zip(rows, fine_rows)]
+    lines = [f'# Paper 000 study in both couplings: {len(specs)} runs of {meta["duration_s"]:g} s', '',
+             f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, {platform.machine()}, '
+             f'{os.cpu_count()} cores, Python {platform.python_version()}; command '
+             f'`.venv/bin/python benchmarks/paper000_study.py` ({wall:.0f} s wall). Values: '
+             f'`config/sweeps/{SWEEP}.yaml` (chosen once, reasons there). Tables: `study.csv` (the study), '
+             f'`refined.csv` (every run again at 192 elements, 0.25 ms); plot: `study.png`.', '']
+    for coupling in ('paper', 'consistent'):
+        group = [r for r in rows if r['coupling'] == coupling]
+        lines += [f'## Coupling `{coupling}`', '', '| finding of paper 000 | section | reproduced | what the runs show |',
+                  '|---|---|---|---|']
+        for claim, where, ok, detail in findings(group):
+            lines.append(f'| {claim} | {where} | {"yes" if ok else "no"} | {detail} |')
+        lines.append('')
+    lines += ['## Resolution', '',
+              f'Peak speed of each run against the same run with twice the elements and half the step: '
+              f'largest error {max(errors) * 100:.2f} %, median {sorted(errors)[len(errors) // 2] * 100:.2f} %; '
+              f'{sum(e > CONVERGED for e in errors)} of {len(errors)} runs above {CONVERGED * 100:g} %:', '']
+    for r, f, e in zip(rows, fine_rows, errors):
+        if e > CONVERGED:
+            lines.append(f'- {r["run"]}: {speed(r):.4g} m/s vs {speed(f):.4g} m/s refined ({e * 100:.1f} %)')
+    faults = [r for r in rows + fine_rows if r['fault']]
+    lines += ['', f'Faults: {len(faults)}'] + [f'- {r["run"]}: {r["fault"]}' for r in faults]
+    report = '\n'.join(lines) + '\n'
+    (OUT / 'README.md').write_text(report)
+    print(report)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
