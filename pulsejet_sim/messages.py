@@ -121,18 +121,27 @@ def ledger_message(ledger: Mapping[str, float], time_s: float, frame_id: str = F
     """Energy ledger (J) -> DiagnosticArray with one status `pulsejet energy ledger`.
 
     One KeyValue per key, value = repr(float) so it parses back to the exact float. Level OK, or
-    WARN when |closure_relative| > 5 % (or is not finite): the books do not balance.
+    WARN when |closure_relative| > 5 % (or is not finite): the books do not balance; or WARN when
+    the books balance only because the model's equations create energy (the `created_*` keys, e.g.
+    the lumped model's `paper` coupling) of more than 5 % of the energy put in.
     """
     closure = float(ledger.get('closure_relative', 0.0))
+    created = sum(float(v) for k, v in ledger.items() if str(k).startswith('created_'))
+    energy_in = float(ledger.get('in_initial', 0.0)) + abs(float(ledger.get('in_actuation_work', 0.0)))
+    created_relative = created / max(energy_in, 1e-12)
     status = DiagnosticStatus()
     status.name = LEDGER_STATUS_NAME
     status.hardware_id = LEDGER_HARDWARE_ID
-    if math.isfinite(closure) and abs(closure) <= LEDGER_WARN_RELATIVE:
-        status.level = DiagnosticStatus.OK
-        status.message = f'energy closure {closure:+.2%} (within {LEDGER_WARN_RELATIVE:.0%})'
-    else:
+    if not (math.isfinite(closure) and abs(closure) <= LEDGER_WARN_RELATIVE):
         status.level = DiagnosticStatus.WARN
         status.message = f'energy closure {closure:+.2%} exceeds {LEDGER_WARN_RELATIVE:.0%}'
+    elif abs(created_relative) > LEDGER_WARN_RELATIVE:
+        status.level = DiagnosticStatus.WARN
+        status.message = (f'energy closure {closure:+.2%}, but the equations create {created:+.4g} J '
+                          f'({created_relative:+.0%} of the energy put in; created_* keys)')
+    else:
+        status.level = DiagnosticStatus.OK
+        status.message = f'energy closure {closure:+.2%} (within {LEDGER_WARN_RELATIVE:.0%})'
     status.values = [KeyValue(key=str(k), value=repr(float(v))) for k, v in ledger.items()]
     array = DiagnosticArray()
     array.header.stamp = stamp(time_s)

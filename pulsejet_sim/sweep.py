@@ -17,9 +17,9 @@ Sweep file (YAML)::
           stiffness:              # axis name -> {label: overrides merged into the scene}
             soft: {material: {stiffness_n_m: 1000}}
             paper: {material: {stiffness_n_m: 2094}}
-          energy_model:
-            consistent: {options: {energy_model: consistent}}
-            paper: {options: {energy_model: paper}}
+          coupling:
+            consistent: {options: {coupling: consistent}}
+            paper: {options: {coupling: paper}}
 
 An axis value may also hold `scene: OTHER` to switch the base scene (e.g. cone vs ellipsoid), and a
 study may list `replace: [section, ...]`: those sections of the base scene are replaced whole by

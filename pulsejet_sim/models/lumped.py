@@ -63,8 +63,26 @@ ACTUATOR_SPEC = {
     'initial_valve_opening': Number(1.0, 0.0, 1.0, unit=''),
 }
 TERMS_SPEC = {name: Flag(True) for name in TERM_BITS}
+COUPLINGS = ('consistent', 'paper')
+
+
+@dataclass(frozen=True)
+class DeprecatedAlias:
+    """An optional key that stands for another one (old scenes, e.g. in recordings, still load)."""
+
+    of: str
+    choices: tuple[str, ...]
+    default: str = ''              # '' = not given
+
+    def check(self, key: str, value: Any) -> str:
+        return Choice(None, self.choices).check(key, value)
+
+
 OPTIONS_SPEC = {
-    'energy_model': Choice('consistent', ('consistent', 'paper')),
+    # how the shell and the vehicle are coupled: 'paper' = eqs. (1) and (3) of paper 001 as written,
+    # 'consistent' = the energy-consistent coupling (docs/PHYSICS_LUMPED.md)
+    'coupling': Choice('consistent', COUPLINGS),
+    'energy_model': DeprecatedAlias('coupling', COUPLINGS),   # deprecated name of 'coupling'
     'added_mass_form': Choice('exact', ('exact', 'simplified')),
     'simplified_added_mass_coefficient': Number(0.45, 0.0, 10.0, unit=''),
 }
@@ -132,6 +150,14 @@ class LumpedModel:
         sections = {name: check_section(name, scene.get(name), spec) for name, spec in SECTION_SPECS.items()}
         g, m, f, act = sections['geometry'], sections['material'], sections['fluid'], sections['actuator']
         terms, opts = sections['terms'], sections['options']
+        given_options = scene.get('options') or {}
+        if opts['energy_model']:
+            if 'coupling' in given_options and opts['coupling'] != opts['energy_model']:
+                raise ModelError(f'options.energy_model: {opts["energy_model"]!r} contradicts options.coupling: '
+                                 f'{opts["coupling"]!r}; allowed: only options.coupling (energy_model is its '
+                                 f'deprecated name), or both with the same value')
+            opts['coupling'] = opts['energy_model']
+        opts['energy_model'] = opts['coupling']
         a = g['length_m'] / 2.0
         b0, b_init = g['rest_minor_semi_axis_m'], g['initial_minor_semi_axis_m']
         for key, value in (('rest_minor_semi_axis_m', b0), ('initial_minor_semi_axis_m', b_init)):
@@ -171,8 +197,8 @@ class LumpedModel:
         for name, bit in TERM_BITS.items():
             if terms[name]:
                 flags |= bit
-        if opts['energy_model'] == 'consistent':
-            flags |= K.O_ENERGY_CONSISTENT
+        if opts['coupling'] == 'consistent':
+            flags |= K.O_COUPLING_CONSISTENT
         if opts['added_mass_form'] == 'simplified':
             flags |= K.O_ADDED_MASS_SIMPLIFIED
         p.setflags(write=False)
@@ -231,11 +257,21 @@ class LumpedModel:
             self.flags, state, self.params, 0.0, diag)
 
     def energy_ledger(self, state: np.ndarray, initial_state: np.ndarray | None = None) -> dict[str, float]:
+        """Energy books, J. ``created_*``: energy the applied equations create beyond the
+        energy-consistent ones (negative: destroy), each the integral of (applied - consistent
+        generalised force) x its velocity; never an input. closure = stored - in + out - created."""
         if initial_state is None:
             initial_state = self.initial_state()
         elastic, vehicle, outer, internal = self.stored_energy(state)
         e0 = sum(self.stored_energy(initial_state))
-        out_other = state[K.Y_E_VALVE] + state[K.Y_E_MIX] + state[K.Y_E_KX]
+        out_other = state[K.Y_E_VALVE] + state[K.Y_E_MIX]
+        created = {
+            'created_fluid_stiffness': state[K.Y_C_KX],
+            'created_unpaid_jet_kinetic': state[K.Y_C_JET],
+            'created_nozzle_mass_variation': state[K.Y_C_NOZZLE],
+            'created_unpaid_added_mass_thrust': state[K.Y_C_AMV],
+            'created_unpaid_inflow_momentum': state[K.Y_C_RAM],
+        }
         ledger = {
             'stored_elastic': elastic,
             'stored_kinetic_vehicle': vehicle,
@@ -248,12 +284,13 @@ class LumpedModel:
             'out_viscous': state[K.Y_E_VISC],
             'out_valve': state[K.Y_E_VALVE],
             'out_inflow_mixing': state[K.Y_E_MIX],
-            'out_fluid_stiffness': state[K.Y_E_KX],
             'out_other': out_other,
+            **created,
         }
+        created_total = sum(created.values())
         stored = elastic + vehicle + outer + internal
         out = state[K.Y_E_JET] + state[K.Y_E_DRAG] + state[K.Y_E_VISC] + out_other
-        closure = stored - e0 - state[K.Y_W_PUMP] + out
+        closure = stored - e0 - state[K.Y_W_PUMP] + out - created_total
         ledger['closure_error'] = closure
         ledger['closure_relative'] = closure / max(e0 + abs(state[K.Y_W_PUMP]), 1e-12)
         return {k: float(v) for k, v in ledger.items()}
@@ -273,6 +310,7 @@ class LumpedModel:
 
     # ---- figures the paper reports -------------------------------------------------------------
     def fluid_stiffness_ratio(self, state: np.ndarray) -> float:
-        """k_x / k at this state (paper's Fig. 6)."""
+        """k_x / k at this state (paper's Fig. 6), k_x from section 3.5 / eq. 10 in both couplings
+        (applied as k_x b only in the paper coupling)."""
         _, k_x = K.fluid_stiffness_force(state[K.Y_B], state[K.Y_U], self.params)
         return float(k_x / self.params[K.P_K])

@@ -1,15 +1,26 @@
 """numba kernels of the lumped pulsed-jet model (paper 001, section 3): vehicle axial motion and the
 minor semi-axis ``b`` of an ellipsoidal shell, with the pump and the stern valve as inputs.
 
-Equations (see ``docs/PHYSICS_LUMPED.md`` for the derivation and the energy ledger)::
+Equations (see ``docs/PHYSICS_LUMPED.md`` for the derivation, the citations and the energy ledger).
+Coupling ``consistent`` (the default, energy-consistent)::
 
     vehicle:  (M + m_f + m_x) U' = T - D - m_x' U - rho Q_in U
-    shell:    (I_b + m_b + m_l) b'' = -k (b - b0) - F_kx + R_x + V_b dp_n + Lambda V_b (Q_p' - c_a b'^2)
+    shell:    (I_b + m_b + m_l) b'' = -k (b - b0) + R_x + V_b dp_n + Lambda V_b (Q_p' - c_a b'^2)
+
+Coupling ``paper`` (eqs. 1 and 3 of paper 001 as written)::
+
+    vehicle:  (M + m_f + m_x) U' = T - D - m_x' U
+    shell:    (I_b + m_b + m_l) b'' = -k (b - b0) - k_x b + V_b (dp_visc + dp_valve) + Lambda V_b Q_p'
 
 with ``V_b = dV/db = 8/3 pi a b``, the nozzle flow ``Q_n = Q_p - V_b b'`` (continuity, positive out),
-the nozzle inertance ``Lambda = rho L_n / A_n`` (so ``m_l = Lambda V_b^2``, the paper's eq. 8) and the
-pressure drop across the nozzle ``dp_n`` (laminar friction, inlet loss, valve loss and, in the
-energy-consistent model, the Bernoulli pressure that accelerates the jet).
+the nozzle inertance ``Lambda = rho L_n / A_n`` (so ``m_l = Lambda V_b^2``, the paper's eq. 8), the
+pressure drop across the nozzle ``dp_n = dp_visc + dp_valve + dp_jet`` (laminar friction and inlet loss,
+i.e. the paper's ``c b'``; valve loss; the Bernoulli pressure that accelerates the jet), the outer
+flow's pull ``R_x = 1/2 dm_x/db U^2`` and the paper's fluid stiffness ``k_x`` (section 3.5, eq. 10).
+
+The energy ledger books what the paper's equations create, each as the power of the difference
+between the applied and the energy-consistent generalised force (``Y_C_*``): the closure
+``stored - in + out - created`` then vanishes to the integrator's order in both couplings.
 
 Physical terms are bits of an integer ``flags`` that reaches the step loop through
 ``numba.literally``: numba compiles (and caches) one specialisation per term set and LLVM removes
@@ -38,7 +49,7 @@ T_FLUID_MASS = 1 << 7
 T_DRAG = 1 << 8
 T_JET_THRUST = 1 << 9
 # model options (also bits, so they are compiled in the same way)
-O_ENERGY_CONSISTENT = 1 << 16     # the shell pays for the jet: Bernoulli back pressure etc.
+O_COUPLING_CONSISTENT = 1 << 16   # the shell pays for the jet: Bernoulli back pressure etc.
 O_ADDED_MASS_SIMPLIFIED = 1 << 17  # m_x = C_1 rho 4/3 pi b^3 instead of Lamb's exact spheroid
 
 # ---- state indices ----------------------------------------------------------------------------
@@ -53,10 +64,16 @@ Y_E_DRAG = 7
 Y_E_VISC = 8
 Y_E_VALVE = 9      # valve throttling loss plus the loss when the valve seals a moving flow
 Y_E_MIX = 10       # kinetic energy given to water drawn in (pump and nozzle inflow), then mixed
-Y_E_KX = 11        # work of the shell against the fluid-stiffness pressure
-Y_VALVE = 12       # actual valve opening 0..1 (rate limited, piecewise constant over a step)
-NY = 13
-N_INTEGRATED = 12  # components 0..11 go through Runge-Kutta
+# energy created by the applied equations beyond the energy-consistent ones (negative: destroyed), J;
+# each is int (applied - consistent generalised force) x its velocity dt
+Y_C_KX = 11        # the paper's k_x b: no reaction anywhere
+Y_C_JET = 12       # the Bernoulli pressure that the paper's shell does not pay for the jet
+Y_C_NOZZLE = 13    # the convective term 1/2 dm_l/db b'^2 of the b-dependent nozzle mass
+Y_C_AMV = 14       # the outer flow's pull R_x that pays for d(1/2 m_x U^2)/dt
+Y_C_RAM = 15       # the momentum of water drawn in at rest (rho Q_in U)
+Y_VALVE = 16       # actual valve opening 0..1 (rate limited, piecewise constant over a step)
+NY = 17
+N_INTEGRATED = 16  # components 0..15 go through Runge-Kutta
 
 # ---- parameter indices ------------------------------------------------------------------------
 P_RHO = 0          # water density, kg/m^3
@@ -89,7 +106,7 @@ D_Q_N = 3
 D_P_CAV = 4
 D_ACCEL = 5
 D_M_X = 6
-D_K_X = 7
+D_K_X = 7          # the paper's fluid stiffness k_x (eq. 10), N/m, in both couplings
 D_M_L = 8
 D_VEHICLE_MASS = 9
 D_B_MASS = 10
@@ -133,8 +150,10 @@ def added_mass(flags, b, p):
 
 @njit(cache=True, inline='always')
 def fluid_stiffness_force(b, u, p):
-    """Paper's external-flow pressure on the shell: F = q 2 pi a b dCp, dCp = -2 Cp,
-    Cp = 1 - (1 + b/2a)^2, q = rho U^2 / 2. Returns (F in N, k_x = dF/db in N/m)."""
+    """The paper's fluid stiffness (section 3.5, eqs. 9-10; eq. 10 lost): U_max/U = 1 + b/2a,
+    Cp = 1 - (U_max/U)^2, dCp = -2 Cp (the internal coefficient Cp' not given: 0), integral force
+    F = q 2 pi a b dCp with q = rho U^2 / 2, and dF = k_x db. Returns (F in N, k_x in N/m); the
+    paper coupling applies k_x b (eq. 3), the consistent one only reports k_x."""
     a = p[P_A]
     q = 0.5 * p[P_RHO] * u * u
     s = 1.0 + b / (2.0 * a)
@@ -147,7 +166,11 @@ def fluid_stiffness_force(b, u, p):
 
 @njit(cache=True)
 def rhs(flags, y, valve, q_cmd, p, dy, diag):
-    """Time derivatives of y at fixed valve opening and pump command; fills diag."""
+    """Time derivatives of y at fixed valve opening and pump command; fills diag.
+
+    Every force that the energy-consistent coupling applies is computed (its ``*_ref`` value); the
+    coupling decides which are applied, and the ledger books the power of the difference as
+    created energy (``Y_C_*``)."""
     rho = p[P_RHO]
     a = p[P_A]
     u = y[Y_U]
@@ -176,27 +199,35 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     dmx_db = 0.0
     if flags & (T_ADDED_MASS | T_ADDED_MASS_VARIATION):
         m_x, dmx_db = added_mass(flags, b, p)
-    f_kx = 0.0
+    # the paper's fluid stiffness k_x (section 3.5, eq. 10): applied as k_x b in eq. 3 by the paper
+    # coupling; a reported diagnostic only in the consistent one
     k_x = 0.0
+    f_kx = 0.0
     if flags & T_FLUID_STIFFNESS:
-        f_kx, k_x = fluid_stiffness_force(b, u, p)
-    reaction = 0.0
+        _, k_x = fluid_stiffness_force(b, u, p)
+        if not flags & O_COUPLING_CONSISTENT:
+            f_kx = k_x * b
+    # the outer flow's pull on the shell that pays for d(1/2 m_x U^2)/dt: R_x = 1/2 dm_x/db U^2
+    reaction_ref = 0.0
     if flags & T_ADDED_MASS_VARIATION:
-        if flags & O_ENERGY_CONSISTENT:
-            # the outer flow's pull on the shell that pays for d(1/2 m_x U^2)/dt
-            reaction = 0.5 * dmx_db * u * u
+        reaction_ref = 0.5 * dmx_db * u * u
+    reaction = 0.0
+    if flags & O_COUPLING_CONSISTENT:
+        if flags & T_FLUID_STIFFNESS:
+            reaction = reaction_ref
 
     sealed = valve <= 0.0
     damping_rate = 0.0
+    c_jet = 0.0
+    c_nozzle = 0.0
     if sealed:
         # valve shut: incompressible water, the pump alone sets the volume rate
         q_n = 0.0
         dw = (dq_p - c_a * w * w) / v_b
-        spring = p[P_K] + k_x
         p_cav = (m_shell * dw + p[P_K] * (b - p[P_B0]) + f_kx - reaction) / v_b
         dp_visc = 0.0
         dp_valve = 0.0
-        dp_jet = 0.0
+        dp_jet_ref = 0.0
         m_b_total = m_shell
     else:
         q_n = q_p - v_b * w
@@ -205,6 +236,8 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
         dp_visc = 0.0
         dpdq = 0.0
         if flags & T_VISCOUS_LOSS:
+            # the paper's c b' (section 3.3): Darcy's laminar f = 64/Re along the nozzle plus a
+            # square-edged inlet coefficient, dp = 1/2 rho (f L/d + K) u_n^2
             d_n = p[P_D_N]
             lam = 32.0 * p[P_MU] * p[P_L_N] / (d_n * d_n)
             dp_visc = lam * u_n + sgn * 0.5 * rho * p[P_K_INLET] * u_n * u_n
@@ -213,22 +246,31 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
         contraction = 1.0 / valve - 1.0
         dp_valve = sgn * 0.5 * rho * contraction * contraction * u_n * u_n
         dpdq += rho * contraction * contraction * abs(u_n) / a_n
+        # Bernoulli pressure that accelerates the jet, and the convective part of the nozzle inertia
+        # (m_l = Lambda V_b^2 depends on b: 1/2 dm_l/db b'^2 = Lambda V_b c_a b'^2)
+        dp_jet_ref = sgn * 0.5 * rho * u_n * u_n
         dp_jet = 0.0
         convective = 0.0
-        if flags & O_ENERGY_CONSISTENT:
-            dp_jet = sgn * 0.5 * rho * u_n * u_n
+        if flags & O_COUPLING_CONSISTENT:
+            dp_jet = dp_jet_ref
             dpdq += rho * abs(u_n) / a_n
             convective = c_a * w * w
+        else:
+            c_jet = -v_b * dp_jet_ref * w
+            c_nozzle = inertance * v_b * c_a * w * w * w
         dp_n = dp_visc + dp_valve + dp_jet
         m_b_total = m_shell + m_l
         force = (-p[P_K] * (b - p[P_B0]) - f_kx + reaction + v_b * dp_n
                  + inertance * v_b * (dq_p - convective))
         dw = force / m_b_total
-        # cavity pressure at the nozzle inlet: what the nozzle flow needs (drop + acceleration)
+        # cavity pressure at the nozzle inlet: what the nozzle flow needs (drop + acceleration); the
+        # same definition in both couplings, so the pump's work is the same physical quantity
         dq_n = dq_p - c_a * w * w - v_b * dw
-        p_cav = dp_n + inertance * dq_n
-        spring = p[P_K] + k_x
+        p_cav = dp_visc + dp_valve + dp_jet_ref + inertance * dq_n
         damping_rate = v_b * v_b * dpdq / m_b_total
+    spring = p[P_K]
+    if not flags & O_COUPLING_CONSISTENT:
+        spring += k_x
 
     # vehicle
     m_vehicle = p[P_M_SOLID]
@@ -249,10 +291,13 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     q_in = q_p
     if q_n < 0.0:
         q_in -= q_n
-    ram = 0.0
+    ram_ref = 0.0
     if flags & T_FLUID_MASS:
-        # water drawn in at rest must be brought to the vehicle's speed
-        ram = rho * q_in * u
+        # water drawn in at rest must be brought to the vehicle's speed (eq. 1 has no such term)
+        ram_ref = rho * q_in * u
+    ram = 0.0
+    if flags & O_COUPLING_CONSISTENT:
+        ram = ram_ref
     du = (thrust - drag + amv_force - ram) / m_vehicle
 
     dy[Y_X] = u
@@ -269,11 +314,16 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     else:
         # inflow through the nozzle: its jet into the cavity and its speed-up to U are mixed away
         dy[Y_E_JET] = 0.0
-        dy[Y_E_MIX] = 0.5 * rho * q_in * u * u + q_n * dp_jet
+        dy[Y_E_MIX] = 0.5 * rho * q_in * u * u + q_n * dp_jet_ref
     dy[Y_E_DRAG] = drag * u
     dy[Y_E_VISC] = q_n * dp_visc
     dy[Y_E_VALVE] = q_n * dp_valve
-    dy[Y_E_KX] = f_kx * w
+    # created energy: (applied - energy-consistent generalised force) x velocity
+    dy[Y_C_KX] = -f_kx * w
+    dy[Y_C_JET] = c_jet
+    dy[Y_C_NOZZLE] = c_nozzle
+    dy[Y_C_AMV] = (reaction - reaction_ref) * w
+    dy[Y_C_RAM] = (ram_ref - ram) * u
 
     diag[D_THRUST] = thrust
     diag[D_AMV_FORCE] = amv_force
