@@ -52,7 +52,8 @@ def test_ledger_closes_at_second_order_and_names_what_the_paper_creates(coupling
 
 
 def test_paper_shell_does_not_feel_the_vehicle_consistent_one_does():
-    """Paper 000 section 3.3: the vehicle velocity "has been used only for the kinematics equation":
+    """Paper 000, the coupling paragraph before the state-space form: the vehicle velocity "has been
+    used only for the kinematics equation":
     the shell's motion must not depend on the vehicle's mass (hence speed); in the consistent coupling
     it does (the shell's drag, inertia and the ring force see the vehicle)."""
     def profile(coupling, mass):

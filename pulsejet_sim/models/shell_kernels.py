@@ -48,7 +48,7 @@ F_BODY = 8
 F_CABLE = 16
 F_MUSCLE = 32
 F_ROUTINE = 64
-# paper 000's coupling (section 3, Fig. 5): the shell is solved in the body frame with only drag and
+# paper 000's coupling (Fig. 5 and the paragraph before its state-space form): the shell is solved in the body frame with only drag and
 # added mass from the water (no cavity pressure on the wall), and the vehicle is driven by the jet
 # thrust alone; the vehicle velocity enters only the kinematics (the position update)
 F_PAPER = 128
@@ -821,13 +821,16 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                 if flags & F_BODY:
                     Us = _paper_vehicle_midpoint(flags, st, U, alpha, dt, P)
                 acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
-                # what the consistent wall pressure (suction on inflow) would have charged the
-                # shell: the kinetic energy flux of the jet in the body frame, 1/2 rho A |u|^3
-                # (docs/PHYSICS_SHELL.md, "The ledger of the paper coupling")
-                if flags & F_JET:
-                    aj_ = st[T_AOUT] if st[T_VDOT] < 0.0 else P[P_AIN]
-                    uj_ = abs(st[T_VDOT]) / aj_
-                    state[tail + S_CREATED] += dt * 0.5 * P[P_RHO] * aj_ * uj_ * uj_ * uj_
+                # what the consistent wall pressure would have charged the shell for the outflow:
+                # the jet's kinetic energy flux in the body frame, 1/2 rho A u^3 (docs/PHYSICS_SHELL.md,
+                # "The ledger of the paper coupling").  On inflow nothing is created: no suction acts
+                # on the wall and the inflow jet's kinetic energy is not booked out either
+                if (flags & F_JET) and st[T_VDOT] < 0.0:
+                    uj_ = -st[T_VDOT] / st[T_AOUT]
+                    state[tail + S_CREATED] += dt * 0.5 * P[P_RHO] * st[T_AOUT] * uj_ * uj_ * uj_
+                elif flags & F_JET:
+                    uin_ = st[T_VDOT] / P[P_AIN]
+                    po -= 0.5 * P[P_RHO] * P[P_AIN] * uin_ * uin_ * uin_
             else:
                 acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
             for i in range(n1):
