@@ -5,8 +5,10 @@ Not a test (about 10 minutes on 2 cores): writes benchmarks/results/paper000_stu
 
     .venv/bin/python benchmarks/paper000_study.py
 
-The findings are checked by the rules in `findings` below, fixed before the study first ran; the
-study's values are in config/sweeps/paper000_study.yaml, chosen once with their reasons there.
+The findings are checked by the rules in `findings` below, fixed before the study first ran (and
+made stricter after an independent review, before any outcome had been read: findings 2, 3, 4);
+the study's values are in config/sweeps/paper000_study.yaml, chosen once with their reasons there.
+`--report-only` rebuilds README.md from the stored tables without running anything.
 `study.csv` holds only deterministic columns, so a rerun reproduces it bit for bit (the test
 `test/test_paper000_study.py` reruns one case and compares it with its stored row).
 """
@@ -31,7 +33,7 @@ COLUMNS = ('peak_speed_m_s', 'mean_speed_m_s', 'distance_m', 'peak_thrust_n', 'v
 REFINED = {'mesh': {'elements': 192}, 'simulation': {'dt_s': 2.5e-4}}   # twice the elements, half the step
 CONVERGED = 0.02          # a run's peak speed within 2 % of the refined run's
 SPREAD_ALMOST_NONE = 1.15  # "almost independent of the routine": fastest/slowest routine <= 1.15
-DOUBLES = 1.8              # "doubling": fastest/slowest routine >= 1.8
+DOUBLES = 1.8              # "doubling": fastest/second-fastest routine >= 1.8
 
 
 def speed(row) -> float:
@@ -62,24 +64,31 @@ def findings(rows: list[dict]) -> list[tuple[str, str, bool, str]]:
             twin = select(ext, mantle=mantle, distribution='falling', stiffness=r['stiffness'], routine=r['routine'])[0]
             values.append(max(speed(r), speed(twin)) / min(speed(r), speed(twin)))
         ratios[mantle] = sum(values) / len(values)
-    ok = ratios['ellipsoid'] - 1.0 > 2.0 * (ratios['cone'] - 1.0)
+    # "how little, instead, it affects the performances of the conical geometry": the cone's own
+    # spread must be small too, not only smaller than the ellipsoid's
+    ok = ratios['ellipsoid'] - 1.0 > 2.0 * (ratios['cone'] - 1.0) and ratios['cone'] <= SPREAD_ALMOST_NONE
     out.append(('external: the spatial distribution matters much more for the ellipsoid than for the cone',
                 '5.1, Fig. 11', ok, f'mean faster/slower ratio of the two distributions: ellipsoid '
-                f'{ratios["ellipsoid"]:.2f}, cone {ratios["cone"]:.2f} (rule: ellipsoid - 1 > 2 (cone - 1))'))
-    best = max(inn, key=speed)
-    ok = best['mantle'] == 'cone' and best['stiffness'] == stiffest(inn)
-    out.append(('internal: the conical mantle with high stiffness is best', '5.2, Fig. 13', ok,
-                f'best: {best["label"]} {speed(best):.3g} m/s'))
-    spreads = {}
+                f'{ratios["ellipsoid"]:.2f}, cone {ratios["cone"]:.2f} (rule: ellipsoid - 1 > 2 (cone - 1) '
+                f'and cone <= {SPREAD_ALMOST_NONE})'))
+    # Fig. 13's caption: "The highest peaks correspond to the conical mantles with the highest stiffness"
+    top3 = sorted(inn, key=speed, reverse=True)[:3]
+    ok = all(r['mantle'] == 'cone' and r['stiffness'] == stiffest(inn) for r in top3)
+    out.append(('internal: the conical mantles with the highest stiffness give the highest peaks', '5.2, Fig. 13', ok,
+                'top three: ' + ', '.join(f'{r["label"]} {speed(r):.3g} m/s' for r in top3)))
+    spreads, singled = {}, {}
     for mantle in ('ellipsoid', 'cone'):
         for stiffness in sorted({r['stiffness'] for r in inn}):
             values = sorted(speed(r) for r in select(inn, mantle=mantle, stiffness=stiffness))
             spreads[mantle, stiffness] = values[-1] / values[0]
-    ell = {s: x for (m, s), x in spreads.items() if m == 'ellipsoid'}
+            singled[mantle, stiffness] = values[-1] / values[-2]
+    # "in test number 9, benefits from a particular resonance, hence doubling the efficacy": one
+    # routine stands out, so the fastest is compared with the second fastest, not the slowest
+    ell = {s: x for (m, s), x in singled.items() if m == 'ellipsoid'}
     cone = {s: x for (m, s), x in spreads.items() if m == 'cone'}
     out.append(('internal: one ellipsoid routine resonates and doubles the speed', '5.2, Fig. 17 (test 9)',
                 any(x >= DOUBLES for x in ell.values()),
-                'fastest/slowest routine: ' + ', '.join(f'{s} {x:.2f}' for s, x in ell.items())
+                'fastest/second-fastest routine: ' + ', '.join(f'{s} {x:.2f}' for s, x in ell.items())
                 + f' (rule: some >= {DOUBLES})'))
     out.append(('internal: the cone is almost independent of the routine', '5.2, Fig. 17',
                 all(x <= SPREAD_ALMOST_NONE for x in cone.values()),
@@ -92,8 +101,7 @@ def as_rows(specs: list[RunSpec], results) -> list[dict]:
     rows = []
     for spec, res in zip(specs, results):
         labels = dict(spec.labels)
-        row = {'run': spec.name, 'study': spec.study, 'label': '/'.join(v for k, v in spec.labels if k != 'coupling'),
-               'fault': res.fault, **labels}
+        row = {'run': spec.name, 'study': spec.study, 'fault': res.fault, **labels}
         row.update({c: res.metrics.get(c, float('nan')) for c in COLUMNS})
         rows.append(row)
     return rows
@@ -113,8 +121,21 @@ def refined(spec: RunSpec) -> RunSpec:
                    spec.replace)
 
 
+def read_table(path: Path) -> list[dict]:
+    with open(path, newline='') as fh:
+        rows = list(csv.DictReader(fh))
+    for r in rows:
+        for c in COLUMNS:
+            r[c] = float(r[c])
+        r['label'] = '/'.join(r[k] for k in ('mantle', 'stiffness', 'routine', 'distribution') if r[k])
+    return rows
+
+
 def main() -> int:
     meta, specs = load_sweep(SWEEP)
+    if '--report-only' in sys.argv[1:]:
+        report(meta, len(specs), read_table(OUT / 'study.csv'), read_table(OUT / 'refined.csv'), None)
+        return 0
     start = time.perf_counter()
     results = run_sweep(specs)
     fine = run_sweep([refined(s) for s in specs])
@@ -125,13 +146,27 @@ def main() -> int:
     write_table(rows, OUT / 'study.csv')
     write_table(fine_rows, OUT / 'refined.csv')
     plot_bars(results, meta['metric'], OUT / 'study.png')
+    report(meta, len(specs), read_table(OUT / 'study.csv'), read_table(OUT / 'refined.csv'), wall)
+    return 0
+
+
+def report(meta: dict, n_runs: int, rows: list[dict], fine_rows: list[dict], wall: float | None) -> None:
     errors = [abs(speed(r) / speed(f) - 1.0) for r, f in zip(rows, fine_rows)]
-    lines = [f'# Paper 000 study in both couplings: {len(specs)} runs of {meta["duration_s"]:g} s', '',
-             f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, {platform.machine()}, '
-             f'{os.cpu_count()} cores, Python {platform.python_version()}; command '
-             f'`.venv/bin/python benchmarks/paper000_study.py` ({wall:.0f} s wall). Values: '
+    when = (f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, {platform.machine()}, '
+            f'{os.cpu_count()} cores, Python {platform.python_version()}; command '
+            f'`.venv/bin/python benchmarks/paper000_study.py` ({wall:.0f} s wall)') if wall is not None else (
+            'report rebuilt from the stored tables by `benchmarks/paper000_study.py --report-only`')
+    lines = [f'# Paper 000 study in both couplings: {n_runs} runs of {meta["duration_s"]:g} s', '',
+             f'{when}. Values: '
              f'`config/sweeps/{SWEEP}.yaml` (chosen once, reasons there). Tables: `study.csv` (the study), '
-             f'`refined.csv` (every run again at 192 elements, 0.25 ms); plot: `study.png`.', '']
+             f'`refined.csv` (every run again at 192 elements, 0.25 ms); plot: `study.png`.', '',
+             'History, so that a reproduced finding is read for what it is worth: an earlier study of the '
+             'same design (rigid-ring nozzle, consistent coupling, a 12 N cable load with no stated source; '
+             'removed in 2c6c12c) reproduced none of the four findings it checked. The readings used here '
+             '(the paper coupling, the mantle edge as the nozzle, the cable load sized from the authors\' '
+             'code, the constant-depth muscle) were adopted after it, and the rules of findings 2-4 and the '
+             'body\'s added mass after an independent review, before any outcome of this study was read. '
+             'Discussion: docs/PHYSICS_SHELL.md.', '']
     for coupling in ('paper', 'consistent'):
         group = [r for r in rows if r['coupling'] == coupling]
         lines += [f'## Coupling `{coupling}`', '', '| finding of paper 000 | section | reproduced | what the runs show |',
@@ -148,10 +183,9 @@ def main() -> int:
             lines.append(f'- {r["run"]}: {speed(r):.4g} m/s vs {speed(f):.4g} m/s refined ({e * 100:.1f} %)')
     faults = [r for r in rows + fine_rows if r['fault']]
     lines += ['', f'Faults: {len(faults)}'] + [f'- {r["run"]}: {r["fault"]}' for r in faults]
-    report = '\n'.join(lines) + '\n'
-    (OUT / 'README.md').write_text(report)
-    print(report)
-    return 0
+    text = '\n'.join(lines) + '\n'
+    (OUT / 'README.md').write_text(text)
+    print(text)
 
 
 if __name__ == '__main__':
