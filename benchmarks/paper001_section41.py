@@ -154,8 +154,8 @@ def main() -> None:
         '`created_*` ledger keys at the end (energy that the applied equations make beyond the '
         'energy-consistent ones); "closure" = stored - in + out - created.',
         '',
-        'Paper (sections 4.2, 5): fluid mass settles near 1.0 kg; added-mass variation up to ~75 % of '
-        'the propulsive force; k_x/k about 1 %, "always negligible"; deflation about 1 s (Fig. 7, axis '
+        'Paper (sections 4.2, 5): fluid mass settles near 1.0 kg; added-mass variation "as much as 75%" of '
+        'the propulsive force; k_x/k about 1 %, "always negligible"; deflation about 1 s (our inference from Fig. 7, axis '
         'to 1.4 s); peak speed: no number in the text.',
         '',
         'Readings:',

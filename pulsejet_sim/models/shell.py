@@ -38,7 +38,7 @@ pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell:
 ``-1/2 rho C_t A_i |v_t| v_t`` along the current tangent.
 
 *Couplings* (scene key ``coupling``; docs/PHYSICS_SHELL.md has the citations).  ``consistent``
-(default): as described above.  ``paper``: paper 000's scheme (section 3.3, Fig. 5): the shell is
+(default): as described above.  ``paper``: paper 000's scheme (its coupling of Fig. 5): the shell is
 solved in the body frame (its drag and added mass see only its own motion relative to the body),
 the water loads the wall only through drag and added mass (no cavity pressure), and the vehicle
 ``(M + m_x + rho V) U' = T - D - ram`` is driven by the thrust of the shell's volume rate; the
@@ -376,8 +376,8 @@ class ShellModel:
         free = np.ones(n1, bool)
         free[0] = free[-1] = False
         if outlet == 'edge':
-            # paper 000, "at the boundary overlooking the rigid cap ... a static condition": the edge
-            # carries no prescribed radius or angle (zero wrench), only its axial place on the body
+            # our reading of paper 000 section 5.1 ("a shrinkage of the nozzle area"): the edge carries
+            # no prescribed radius or angle (zero wrench), only its axial place on the body
             Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXT] = 0.0
             # its axial place is the body's: no r-z coupling of the added mass at that node (the
             # residual would otherwise pull the vehicle speed held in the ring's axial slot into r)
