@@ -424,6 +424,10 @@ class ShellModel:
                 xi = X / X[-1]
                 shape = {'uniform': np.ones(n1), 'rising': xi, 'falling': 1.0 - xi}[dist]
                 w = shape * free
+                if outlet == 'edge':
+                    # the load is distributed along the meridian: a free end node carries half an
+                    # element's share (trapezoidal rule), interior nodes a whole one (equal elements)
+                    w[-1] *= 0.5
                 if w.sum() <= 0:
                     raise ModelError(f'actuation.distribution: {dist!r} loads no free node; allowed: uniform')
                 Nd[:, sk.N_WC] = w / w.sum()
