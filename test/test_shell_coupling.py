@@ -44,11 +44,29 @@ def test_ledger_closes_at_second_order_and_names_what_the_paper_creates(coupling
         assert not any(k.startswith('in_') and k not in ('in_initial', 'in_actuation_work') for k in led)
         if coupling == 'paper':
             # the wall pays nothing for the jet: its kinetic energy flux is booked as created, never as input
-            assert led['created_unpaid_jet_kinetic'] > 0.05 * led['in_actuation_work'], led
+            assert led['created_unpaid_jet_kinetic'] > 0.0, led
         else:
             assert 'created_unpaid_jet_kinetic' not in led
     assert closures[0] < 1e-3, closures
     assert closures[0] / max(closures[1], 1e-15) > 3.0, closures     # second order in the step
+
+
+def test_created_energy_is_the_outflow_jets_kinetic_energy_flux():
+    """created_unpaid_jet_kinetic = sum over outflow steps of dt 1/2 rho A u_j^3 = -dt 1/2 rho V' u_j^2,
+    from the jet speed and volume rate each step reports (inflow creates nothing)."""
+    model = ShellModel.from_scene(cone_scene('paper', 1e-3))
+    state = model.initial_state()
+    tail = 6 * model.n_nodes
+    expected, inflow_steps = 0.0, 0
+    for k in range(600):
+        model.advance(state, k * 1e-3, 1, Command())
+        vdot, uj = state[tail + sk.S_VDOT], state[tail + sk.S_UJ]
+        if vdot < 0.0:
+            expected += 1e-3 * 0.5 * 1022.0 * -vdot * uj * uj
+        else:
+            inflow_steps += 1
+    assert inflow_steps > 50                         # the routine refills, and that creates nothing
+    assert model.energy_ledger(state)['created_unpaid_jet_kinetic'] == pytest.approx(expected, rel=1e-12)
 
 
 def test_paper_shell_does_not_feel_the_vehicle_consistent_one_does():
