@@ -110,7 +110,7 @@ def run_rate(rate_hz: float, seconds: float, rtf: float, scene: str, domain: int
 
     def on_diagnostics(msg):
         for s in msg.status:
-            if st['measuring'] and s.name.startswith('pulsejet: sim_node'):
+            if st['measuring'] and s.name.startswith('pulsejet: ') and s.name.endswith('sim_node'):
                 values = {kv.key: kv.value for kv in s.values}
                 try:
                     physics_us.append(float(values.get('physics_us_per_step', 'nan')))
@@ -185,7 +185,7 @@ def main(argv=None) -> int:
     ap.add_argument('--rates', type=float, nargs='+', default=[100.0, 500.0, 1000.0], help='state rates in Hz')
     ap.add_argument('--real-time-factor', type=float, default=1.0)
     ap.add_argument('--scene', default='pump_cycle')
-    ap.add_argument('--domain-id', type=int, default=None, help='ROS domain (default 201 + pid %% 32)')
+    ap.add_argument('--domain-id', type=int, default=None, help='ROS domain (default 215 + pid %% 18)')
     ap.add_argument('--no-write', action='store_true', help=f'do not write {RESULTS}')
     ap.add_argument('--note', default='', help='a line added under the header of the results file')
     args = ap.parse_args(argv)

@@ -11,6 +11,8 @@ simulator reset) the routine restarts.
 Parameters
   scene             (string, read-only)  scene whose `routine:` block gives the kind and defaults; default shell_robot
   rate_hz           (double, live)       command rate in simulated time, [0.001, 10000] Hz; default 50
+  closed_loop       (bool, read-only)    answer every published state with one atomic command stamped
+                                         at that state's time (sim_node's closed_loop pacing); default false
   routine fields    (read-only)          pump_valve: inflate_s, target_volume_m3, pump_flow_m3_s, hold_s,
                                          jet_s, valve_opening, start_delay_s (double), cycles (int);
                                          cable: amplitude_n, frequency_hz, contraction_s, release_s,
@@ -18,8 +20,11 @@ Parameters
                                          start-up; ranges from the routine's spec (`ros2 param describe`)
 Every parameter has a descriptor (description, range); values are checked at declaration and on
 live changes, a rejection names the value and the allowed range.
-Subscribes /clock (rosgraph_msgs/Clock), pulsejet/volume (std_msgs/Float64, m^3).
-Publishes pulsejet/cmd/pump_flow (m^3/s), pulsejet/cmd/valve (0..1), pulsejet/cmd/cable_force (N).
+Subscribes /clock (rosgraph_msgs/Clock, best effort: a reliable or best-effort clock such as a bag
+player's), pulsejet/volume (std_msgs/Float64, m^3), and with closed_loop pulsejet/velocity
+(geometry_msgs/TwistStamped: each state's stamp).
+Publishes pulsejet/cmd/pump_flow (m^3/s), pulsejet/cmd/valve (0..1), pulsejet/cmd/cable_force (N);
+with closed_loop instead pulsejet/cmd/command (sensor_msgs/JointState, all actuators at once).
 """
 from __future__ import annotations
 
@@ -33,6 +38,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from pulsejet_ctrl import routines as _routines
+from pulsejet_sim import messages
 from pulsejet_sim.node_params import ParamSpec, check_parameters
 from pulsejet_sim.scene import DEFAULT_SCENE
 
@@ -61,9 +67,7 @@ class ControllerNode(Node):
     def __init__(self, **kwargs):
         super().__init__('controller_node', **kwargs)
         from pulsejet_ctrl import routines
-        from pulsejet_sim import messages
         from pulsejet_sim.scene import load_scene
-        self._messages = messages
 
         self._specs = {}
         self._ready = False
@@ -72,6 +76,9 @@ class ControllerNode(Node):
         self._declare(ParamSpec('scene', DEFAULT_SCENE, 'scene whose routine block gives the default parameters',
                                 read_only=True, allowed='a scene name under config/ or a YAML file path'))
         self._declare(ParamSpec('rate_hz', 50.0, 'command rate in simulated time (Hz); live', 1e-3, 10000.0))
+        self.closed_loop = bool(self._declare(ParamSpec(
+            'closed_loop', False, 'answer every state with one atomic command stamped at its time '
+            '(for sim_node pacing closed_loop)', read_only=True)))
         # command_driven: a shell scene's built-in cable routine becomes commands sent from here
         scene = load_scene(self.get_parameter('scene').value, command_driven=True)
         scene_routine = dict(getattr(scene, 'routine', None) or {})
@@ -104,14 +111,23 @@ class ControllerNode(Node):
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self._qos = qos
         self._pubs = {}
-        for topic in ('pulsejet/cmd/pump_flow', 'pulsejet/cmd/valve', 'pulsejet/cmd/cable_force'):
-            self._pubs[topic] = self.create_publisher(Float64, topic, qos)
+        if self.closed_loop:
+            self._pubs[messages.TOPIC_CMD_COMMAND] = self.create_publisher(
+                messages.message_class(messages.TOPIC_CMD_COMMAND), messages.TOPIC_CMD_COMMAND, qos)
+        else:
+            for topic in messages.COMMAND_TOPICS:
+                self._pubs[topic] = self.create_publisher(Float64, topic, qos)
         self.volume_m3 = None
         self.last_time_s = None
         self.next_command_s = None
         self.commands_sent = 0
-        self.create_subscription(Clock, '/clock', self._on_clock, qos)
-        self.create_subscription(Float64, 'pulsejet/volume', self._on_volume, qos)
+        best_effort = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        if self.closed_loop:
+            self.create_subscription(messages.message_class(messages.TOPIC_VELOCITY), messages.TOPIC_VELOCITY,
+                                     self._on_state, best_effort)
+        else:
+            self.create_subscription(Clock, messages.TOPIC_CLOCK, self._on_clock, best_effort)
+        self.create_subscription(Float64, messages.TOPIC_VOLUME, self._on_volume, best_effort)
         self.get_logger().info(f'routine {config} at {self.rate_hz:g} Hz of simulated time; waiting for /clock')
 
     def _declare(self, spec: ParamSpec):
@@ -134,16 +150,28 @@ class ControllerNode(Node):
         if math.isfinite(msg.data):
             self.volume_m3 = float(msg.data)
 
-    def _on_clock(self, msg: Clock):
-        t = msg.clock.sec + msg.clock.nanosec * 1e-9
+    def _on_state(self, msg):
+        """Closed loop: answer this state (the volume of the same publication arrives before it)."""
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self._follow_time(t)
+        cmd = self.routine.command(t, self.volume_m3)
+        self._pubs[messages.TOPIC_CMD_COMMAND].publish(messages.command_message(cmd, t))
+        self.commands_sent += 1
+
+    def _follow_time(self, t):
+        """Restart the routine when simulation time goes back (a simulator reset)."""
         if self.last_time_s is None:
-            self.get_logger().info(f'first /clock at t={t:.3f} s')
+            self.get_logger().info(f'first state at t={t:.3f} s')
         elif t < self.last_time_s - 1e-9:
             self.get_logger().warning(f'simulation time went back from {self.last_time_s:.3f} s to {t:.3f} s; '
                                       'restarting the routine')
             self.routine = self._routine_cls.from_config(dict(self.config))
             self.next_command_s = None
         self.last_time_s = t
+
+    def _on_clock(self, msg: Clock):
+        t = msg.clock.sec + msg.clock.nanosec * 1e-9
+        self._follow_time(t)
         if self.next_command_s is not None and t < self.next_command_s - 1e-9:
             return
         self._send(t)
@@ -153,7 +181,7 @@ class ControllerNode(Node):
 
     def _send(self, t):
         cmd = self.routine.command(t, self.volume_m3)
-        for topic, msg in self._messages.command_messages(cmd):
+        for topic, msg in messages.command_messages(cmd):
             pub = self._pubs.get(topic)
             if pub is None:
                 pub = self._pubs[topic] = self.create_publisher(type(msg), topic, self._qos)

@@ -11,7 +11,7 @@
         h.reset()                                             # simulated time back to 0
 
 `SimHarness` starts `python -m pulsejet_sim.sim_node` (and `pulsejet_ctrl.controller_node` with
-`controller=True`) as subprocesses in their own ROS domain (`domain_id`, default 201 + pid % 32,
+`controller=True`) as subprocesses in their own ROS domain (`domain_id`, default 215 + pid % 18,
 unless given) with localhost-only discovery, and talks to them from its own rclpy context and node
 (never the global one): state subscriptions (`latest`, `states`, `wait_for`), command publishers
 (`send`), the pulsejet/pause|step|reset services, the real parameter services of /sim_node
@@ -41,8 +41,8 @@ from typing import Any, Callable
 from pulsejet_sim.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 
-DOMAIN_BASE = 201
-DOMAIN_SPAN = 32
+DOMAIN_BASE = 215   # 215-232: a range ROS documents as safe on Linux
+DOMAIN_SPAN = 18
 STARTUP_TIMEOUT_S = 90.0      # scene loading + JIT compilation of a cold cache
 STOP_TIMEOUT_S = 10.0
 SERVICE_TIMEOUT_S = 30.0
@@ -126,7 +126,7 @@ class SimHarness:
     parameters: further sim_node parameters ({'real_time_factor': 2.0, 'watchdog_timeout_s': 0.5, ...});
         a dict value for 'scene_overrides' is passed as YAML.
     controller: also start controller_node (controller_parameters are its parameters; scene is shared).
-    domain_id: ROS domain (default 201 + pid % 32); discovery is localhost only.
+    domain_id: ROS domain (default 215 + pid % 18); discovery is localhost only.
     wait_started: on entering, wait until the services answer and a first state arrived.
     """
 
@@ -309,7 +309,7 @@ class SimHarness:
 
     def _on_diagnostics(self, msg):
         for status in msg.status:
-            if status.name.startswith('pulsejet: sim_node'):
+            if status.name.startswith('pulsejet: ') and status.name.endswith('sim_node'):
                 self.diagnostics_received.append(Diagnostic(
                     level=int.from_bytes(status.level, 'little') if isinstance(status.level, bytes) else
                     int(status.level), message=status.message, values={kv.key: kv.value for kv in status.values},

@@ -18,46 +18,33 @@ from std_msgs.msg import Float64
 
 from pulsejet_sim.models.base import Command, Observation
 
-FRAME_ID = 'pulsejet/body'
-
-TOPIC_MANTLE_RADIUS = 'pulsejet/mantle_radius'
-TOPIC_VOLUME = 'pulsejet/volume'
-TOPIC_VELOCITY = 'pulsejet/velocity'
-TOPIC_THRUST = 'pulsejet/thrust'
-TOPIC_ENERGY_LEDGER = 'pulsejet/energy_ledger'
-TOPIC_FLUID_MASS = 'pulsejet/fluid_mass'
-TOPIC_CLOCK = '/clock'
-TOPIC_CMD_PUMP_FLOW = 'pulsejet/cmd/pump_flow'
-TOPIC_CMD_VALVE = 'pulsejet/cmd/valve'
-TOPIC_CMD_CABLE_FORCE = 'pulsejet/cmd/cable_force'
-# The command the simulator actually held from the stamped simulation time on (after validation):
-# what re-simulation replays step for step.
-TOPIC_APPLIED_COMMAND = 'pulsejet/applied_command'
-# The mantle's meridian in the body frame: x = axial position (m, forward +), y = radius (m).
-TOPIC_MANTLE_PROFILE = 'pulsejet/mantle_profile'
-APPLIED_COMMAND_NAMES = ('pump_flow_m3_s', 'valve_opening', 'cable_force_n')
-
-# topic -> ROS type name, as in docs/ARCHITECTURE.md
-TOPIC_TYPES: dict[str, str] = {
-    TOPIC_MANTLE_RADIUS: 'std_msgs/msg/Float64',
-    TOPIC_VOLUME: 'std_msgs/msg/Float64',
-    TOPIC_VELOCITY: 'geometry_msgs/msg/TwistStamped',
-    TOPIC_THRUST: 'geometry_msgs/msg/WrenchStamped',
-    TOPIC_ENERGY_LEDGER: 'diagnostic_msgs/msg/DiagnosticArray',
-    TOPIC_FLUID_MASS: 'std_msgs/msg/Float64',
-    TOPIC_CLOCK: 'rosgraph_msgs/msg/Clock',
-    TOPIC_CMD_PUMP_FLOW: 'std_msgs/msg/Float64',
-    TOPIC_CMD_VALVE: 'std_msgs/msg/Float64',
-    TOPIC_CMD_CABLE_FORCE: 'std_msgs/msg/Float64',
-    TOPIC_APPLIED_COMMAND: 'sensor_msgs/msg/JointState',
-    TOPIC_MANTLE_PROFILE: 'geometry_msgs/msg/PolygonStamped',
-}
-STATE_TOPICS = (TOPIC_MANTLE_RADIUS, TOPIC_VOLUME, TOPIC_VELOCITY, TOPIC_THRUST, TOPIC_FLUID_MASS, TOPIC_CLOCK)
-COMMAND_TOPICS = (TOPIC_CMD_PUMP_FLOW, TOPIC_CMD_VALVE, TOPIC_CMD_CABLE_FORCE)
-
-LEDGER_STATUS_NAME = 'pulsejet energy ledger'
-LEDGER_HARDWARE_ID = 'pulsejet'
-LEDGER_WARN_RELATIVE = 0.05   # |closure_relative| above this -> WARN: energy books do not balance
+from pulsejet_sim.interface import (  # noqa: F401  (re-exported: the names of every message)
+    FRAME_ID,
+    TOPIC_MANTLE_RADIUS,
+    TOPIC_VOLUME,
+    TOPIC_VELOCITY,
+    TOPIC_THRUST,
+    TOPIC_ENERGY_LEDGER,
+    TOPIC_FLUID_MASS,
+    TOPIC_CLOCK,
+    TOPIC_CMD_PUMP_FLOW,
+    TOPIC_CMD_VALVE,
+    TOPIC_CMD_CABLE_FORCE,
+    TOPIC_CMD_COMMAND,
+    TOPIC_DIAGNOSTICS,
+    SERVICE_PAUSE,
+    SERVICE_STEP,
+    SERVICE_RESET,
+    TOPIC_APPLIED_COMMAND,
+    TOPIC_MANTLE_PROFILE,
+    APPLIED_COMMAND_NAMES,
+    TOPIC_TYPES,
+    STATE_TOPICS,
+    COMMAND_TOPICS,
+    COMMAND_FIELDS,
+    LEDGER_STATUS_NAME,
+    LEDGER_HARDWARE_ID,
+    LEDGER_WARN_RELATIVE)
 
 
 def message_class(topic: str) -> type:
@@ -181,6 +168,23 @@ def applied_command_message(cmd: Command, time_s: float, frame_id: str = FRAME_I
     msg.velocity = [0.0] * len(APPLIED_COMMAND_NAMES)
     msg.effort = [0.0] * len(APPLIED_COMMAND_NAMES)
     return msg
+
+
+def command_message(cmd: Command, time_s: float, frame_id: str = FRAME_ID) -> JointState:
+    """The atomic command (TOPIC_CMD_COMMAND) answering the state at time_s: every actuator at once."""
+    return applied_command_message(cmd, time_s, frame_id)
+
+
+def command_values(msg: Any) -> tuple[float, dict[str, float]]:
+    """An atomic command message -> (stamp in s, {field: value}); ValueError names what is wrong."""
+    names, values = list(msg.name), list(msg.position)
+    if len(names) != len(values) or not names:
+        raise ValueError(f'{len(names)} names and {len(values)} positions; allowed: the same number, at least '
+                         f'one, names from {", ".join(APPLIED_COMMAND_NAMES)}')
+    unknown = [n for n in names if n not in APPLIED_COMMAND_NAMES]
+    if unknown or len(set(names)) != len(names):
+        raise ValueError(f'names {names!r}; allowed: distinct names from {", ".join(APPLIED_COMMAND_NAMES)}')
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, dict(zip(names, (float(v) for v in values)))
 
 
 def command_from_applied(msg: Any) -> tuple[float, Command]:

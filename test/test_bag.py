@@ -52,6 +52,9 @@ def write_run(path: Path, compression: str = 'zstd') -> None:
             bag.write(messages.TOPIC_APPLIED_COMMAND,
                       serialize_message(messages.applied_command_message(Command(1e-3 * i, 0.5, 2.0 * i), obs.time_s)),
                       log_ns)
+            bag.write(messages.TOPIC_CMD_COMMAND,
+                      serialize_message(messages.command_message(Command(1e-3 * i, 0.5, 2.0 * i), obs.time_s)),
+                      log_ns)
             ledger = {'stored_elastic': 0.25 * i, 'in_actuation_work': 1.0 / 3.0, 'closure_relative': 0.01 * i}
             bag.write('pulsejet/energy_ledger', serialize_message(messages.ledger_message(ledger, obs.time_s)), log_ns)
 

@@ -63,9 +63,10 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
                                 'start_paused': True}) as h:
         recorder = Recorder(h.node, mcap, None)
         try:
-            # every topic but the mantle profile (a shell-model topic; pump_cycle is lumped)
+            # every topic but the mantle profile (a shell-model topic; pump_cycle is lumped) and the
+            # atomic command (sent by closed-loop controllers only)
             h.spin_until(lambda: all(sub.get_publisher_count() > 0 for sub in recorder._subscriptions
-                                     if not sub.topic_name.endswith('mantle_profile')), 30.0,
+                                     if not sub.topic_name.endswith(('mantle_profile', 'cmd/command'))), 30.0,
                          'the recorder to match every topic')
             assert h.resume().success
             assert h.wait_for_exit('sim_node', timeout_s=100) == 0, h.output()[-3000:]

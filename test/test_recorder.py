@@ -62,6 +62,8 @@ class Publisher:
                           messages.profile_message([0.0, 0.01 * (1 + i)], [0.05, -0.05], obs.time_s)))
             batch.append((messages.TOPIC_APPLIED_COMMAND,
                           messages.applied_command_message(Command(1e-3, 0.25 * (i % 4), 0.0), obs.time_s)))
+            batch.append((messages.TOPIC_CMD_COMMAND,
+                          messages.command_message(Command(1e-3, 0.25 * (i % 4), 0.0), obs.time_s)))
             for topic, msg in batch:
                 if topic in self.pubs:
                     self.pubs[topic].publish(msg)

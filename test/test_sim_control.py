@@ -120,8 +120,11 @@ def test_parameters_validated_live_pacing_and_diagnostics(domain):
         assert steps and min(steps) >= 0.0 and max(steps) <= 0.2 + 1e-9, f'clock jumped: {max(steps):.3f} s'
         late = [s for s in after if s.wall_s >= t_change + 0.3]
         rate = (late[-1].time_s - late[0].time_s) / (late[-1].wall_s - late[0].wall_s)
-        assert 2.5 < rate < 5.5, f'achieved factor {rate:.2f} after setting 4'
+        assert rate < 5.5, f'achieved factor {rate:.2f} after setting 4: faster than asked'
         d = h.wait_for_diagnostics(lambda d: d.values.get('real_time_factor_requested') == '4.0', 5.0)
+        # on a loaded machine the node may fall behind, but never silently: the wall time it could
+        # not keep up with is counted
+        assert rate > 2.5 or float(d.values['dropped_wall_s']) > 0.0, (rate, d.values)
         for key in ('real_time_factor_achieved', 'physics_us_per_step', 'lag_s', 'stable_step_margin',
                     'energy_closure_relative', 'command_age_s', 'watchdog', 'fault'):
             assert key in d.values, (key, d.values)
