@@ -13,6 +13,11 @@ TOPIC_THRUST = 'pulsejet/thrust'
 TOPIC_ENERGY_LEDGER = 'pulsejet/energy_ledger'
 TOPIC_FLUID_MASS = 'pulsejet/fluid_mass'
 TOPIC_CLOCK = '/clock'
+# nav_msgs/Odometry of the body along its swimming axis (REP 105: pose in the odom frame, twist in
+# the body frame base_link; the frame names are sim_node parameters)
+TOPIC_ODOMETRY = 'odom'
+ODOM_FRAME_ID = 'odom'
+BASE_FRAME_ID = 'base_link'
 TOPIC_CMD_PUMP_FLOW = 'pulsejet/cmd/pump_flow'
 TOPIC_CMD_VALVE = 'pulsejet/cmd/valve'
 TOPIC_CMD_CABLE_FORCE = 'pulsejet/cmd/cable_force'
@@ -39,6 +44,7 @@ TOPIC_TYPES: dict[str, str] = {
     TOPIC_ENERGY_LEDGER: 'diagnostic_msgs/msg/DiagnosticArray',
     TOPIC_FLUID_MASS: 'std_msgs/msg/Float64',
     TOPIC_CLOCK: 'rosgraph_msgs/msg/Clock',
+    TOPIC_ODOMETRY: 'nav_msgs/msg/Odometry',
     TOPIC_CMD_PUMP_FLOW: 'std_msgs/msg/Float64',
     TOPIC_CMD_VALVE: 'std_msgs/msg/Float64',
     TOPIC_CMD_CABLE_FORCE: 'std_msgs/msg/Float64',
@@ -46,7 +52,8 @@ TOPIC_TYPES: dict[str, str] = {
     TOPIC_APPLIED_COMMAND: 'sensor_msgs/msg/JointState',
     TOPIC_MANTLE_PROFILE: 'geometry_msgs/msg/PolygonStamped',
 }
-STATE_TOPICS = (TOPIC_MANTLE_RADIUS, TOPIC_VOLUME, TOPIC_VELOCITY, TOPIC_THRUST, TOPIC_FLUID_MASS, TOPIC_CLOCK)
+STATE_TOPICS = (TOPIC_MANTLE_RADIUS, TOPIC_VOLUME, TOPIC_VELOCITY, TOPIC_THRUST, TOPIC_FLUID_MASS, TOPIC_ODOMETRY,
+                TOPIC_CLOCK)
 COMMAND_TOPICS = (TOPIC_CMD_PUMP_FLOW, TOPIC_CMD_VALVE, TOPIC_CMD_CABLE_FORCE)
 #: per-actuator command topic -> Command field
 COMMAND_FIELDS = {TOPIC_CMD_PUMP_FLOW: 'pump_flow_m3_s', TOPIC_CMD_VALVE: 'valve_opening',

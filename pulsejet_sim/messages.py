@@ -12,6 +12,7 @@ from typing import Any, Mapping
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point32, PolygonStamped, TwistStamped, WrenchStamped
+from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -27,6 +28,9 @@ from pulsejet_sim.interface import (  # noqa: F401  (re-exported: the names of e
     TOPIC_ENERGY_LEDGER,
     TOPIC_FLUID_MASS,
     TOPIC_CLOCK,
+    TOPIC_ODOMETRY,
+    ODOM_FRAME_ID,
+    BASE_FRAME_ID,
     TOPIC_CMD_PUMP_FLOW,
     TOPIC_CMD_VALVE,
     TOPIC_CMD_CABLE_FORCE,
@@ -52,7 +56,7 @@ def message_class(topic: str) -> type:
     classes = {'std_msgs/msg/Float64': Float64, 'geometry_msgs/msg/TwistStamped': TwistStamped,
                'geometry_msgs/msg/WrenchStamped': WrenchStamped, 'rosgraph_msgs/msg/Clock': Clock,
                'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray,
-               'sensor_msgs/msg/JointState': JointState,
+               'sensor_msgs/msg/JointState': JointState, 'nav_msgs/msg/Odometry': Odometry,
                'geometry_msgs/msg/PolygonStamped': PolygonStamped}
     try:
         return classes[TOPIC_TYPES[topic]]
@@ -79,7 +83,22 @@ def _float64(value: float) -> Float64:
     return Float64(data=float(value))
 
 
-def observation_messages(obs: Observation, frame_id: str = FRAME_ID) -> list[tuple[str, Any]]:
+def odometry_message(obs: Observation, odom_frame_id: str = ODOM_FRAME_ID,
+                     base_frame_id: str = BASE_FRAME_ID) -> Odometry:
+    """The body's pose (x = distance swum along the axis, m) in the odom frame and its twist
+    (linear.x = speed, m/s) in the body frame, stamped with simulation time (REP 105)."""
+    msg = Odometry()
+    msg.header.stamp = stamp(obs.time_s)
+    msg.header.frame_id = odom_frame_id
+    msg.child_frame_id = base_frame_id
+    msg.pose.pose.position.x = float(obs.position_m)
+    msg.pose.pose.orientation.w = 1.0
+    msg.twist.twist.linear.x = float(obs.velocity_m_s)
+    return msg
+
+
+def observation_messages(obs: Observation, frame_id: str = FRAME_ID, odom_frame_id: str = ODOM_FRAME_ID,
+                         base_frame_id: str = BASE_FRAME_ID) -> list[tuple[str, Any]]:
     """(topic, message) for every state topic of one observation, stamped with obs.time_s.
 
     Velocity goes in TwistStamped twist.linear.x (m/s), thrust in WrenchStamped wrench.force.x (N),
@@ -100,6 +119,7 @@ def observation_messages(obs: Observation, frame_id: str = FRAME_ID) -> list[tup
         (TOPIC_VELOCITY, velocity),
         (TOPIC_THRUST, thrust),
         (TOPIC_FLUID_MASS, _float64(obs.fluid_mass_kg)),
+        (TOPIC_ODOMETRY, odometry_message(obs, odom_frame_id, base_frame_id)),
         (TOPIC_CLOCK, Clock(clock=time)),
     ]
 

@@ -18,6 +18,7 @@ Parameters (see PARAMETERS for the ranges; `ros2 param describe /sim_node <name>
   watchdog_clock         (string, live)       sim (simulated seconds, reproducible) | wall (wall seconds)
   watchdog_action        (string, live)       safe (pump off, valve open, cable released) | hold
   diagnostics_period_s   (double, read-only)  /diagnostics period in wall seconds; default 1
+  odom_frame_id, base_frame_id (string, read-only)  frames of `odom` (nav_msgs/Odometry); odom, base_link
 
 Topics, services and types: `pulsejet_sim.messages` (one place for every name). Commands arrive per
 actuator (std_msgs/Float64) or atomically on pulsejet/cmd/command (sensor_msgs/JointState, every
@@ -82,6 +83,10 @@ PARAMETERS = (
     ParamSpec('watchdog_action', 'safe', 'what the tripped watchdog does: safe = pump off, valve open, cable '
               'released; hold = keep the last command', choices=eng.WATCHDOG_ACTIONS),
     ParamSpec('diagnostics_period_s', 1.0, 'period of /diagnostics in wall seconds', 0.05, 60.0, read_only=True),
+    ParamSpec('odom_frame_id', messages.ODOM_FRAME_ID, 'frame of the odometry pose (REP 105)', read_only=True,
+              allowed='a frame name'),
+    ParamSpec('base_frame_id', messages.BASE_FRAME_ID, 'body frame of the odometry twist (REP 105)', read_only=True,
+              allowed='a frame name'),
 )
 PARAMETER_SPECS = {p.name: p for p in PARAMETERS}
 LIVE_CONFIG = ('pacing', 'real_time_factor', 'step_count', 'watchdog_timeout_s', 'watchdog_clock', 'watchdog_action')
@@ -130,6 +135,7 @@ class SimNode(Node):
         self.wait_for_subscribers = p['wait_for_subscribers']
         self.wait_timeout_s = p['wait_timeout_s']
         self.status_name = f'pulsejet: {self.get_fully_qualified_name()}'
+        self.frames = (p['odom_frame_id'], p['base_frame_id'])
 
         reliable = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
         # best effort matches reliable and best-effort publishers alike
@@ -270,7 +276,7 @@ class SimNode(Node):
             profile = self.sim.profile()
             if profile is not None and all(math.isfinite(float(v)) for arr in profile for v in arr):
                 self._pubs[messages.TOPIC_MANTLE_PROFILE].publish(messages.profile_message(*profile, obs.time_s))
-        for topic, msg in messages.observation_messages(obs):
+        for topic, msg in messages.observation_messages(obs, messages.FRAME_ID, *self.frames):
             self._pubs[topic].publish(msg)
         if ledger:
             self._publish_ledger(obs.time_s)

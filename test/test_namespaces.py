@@ -1,0 +1,63 @@
+"""Two robots in one ROS domain: `--ros-args -r __ns:=/robotN` puts every topic, service and the
+diagnostic status of each sim_node under its own name; each publishes nav_msgs/Odometry with the
+configured REP 105 frames. Real processes, real DDS."""
+import subprocess
+import time
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import Odometry
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from conftest import isolate_ros
+from pulsejet_sim.node_params import node_command
+
+
+@pytest.mark.timeout(180)
+def test_two_namespaced_robots_in_one_domain(monkeypatch, tmp_path):
+    domain = isolate_ros(monkeypatch, 57)
+    procs = []
+    for ns, frame in (('robot1', 'robot1/base_link'), ('robot2', 'robot2/base_link')):
+        cmd = node_command('pulsejet_sim.sim_node', {'scene': 'pump_cycle', 'base_frame_id': frame,
+                                                     'odom_frame_id': f'{ns}/odom'}) + ['-r', f'__ns:=/{ns}']
+        log = open(tmp_path / f'{ns}.log', 'wb')
+        procs.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), log))
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node('namespace_probe', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    odometry, statuses = {}, set()
+    qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    for ns in ('robot1', 'robot2'):
+        node.create_subscription(Odometry, f'/{ns}/odom', lambda m, ns=ns: odometry.setdefault(ns, m), qos)
+    node.create_subscription(DiagnosticArray, '/diagnostics',
+                             lambda m: statuses.update(s.name for s in m.status), qos)
+    try:
+        end = time.monotonic() + 120
+        while time.monotonic() < end and not (len(odometry) == 2 and len(statuses) >= 2):
+            executor.spin_once(timeout_sec=0.05)
+        names = {name for name, _ in node.get_topic_names_and_types()}
+        for ns in ('robot1', 'robot2'):
+            for topic in ('odom', 'pulsejet/velocity', 'pulsejet/volume', 'pulsejet/applied_command',
+                          'pulsejet/cmd/command', 'pulsejet/cmd/pump_flow'):
+                assert f'/{ns}/{topic}' in names, (ns, topic, sorted(names))
+        services = {name for name, _ in node.get_service_names_and_types()}
+        assert {'/robot1/pulsejet/reset', '/robot2/pulsejet/reset'} <= services
+        assert {'pulsejet: /robot1/sim_node', 'pulsejet: /robot2/sim_node'} <= statuses, statuses
+        for ns in ('robot1', 'robot2'):
+            assert odometry[ns].header.frame_id == f'{ns}/odom'
+            assert odometry[ns].child_frame_id == f'{ns}/base_link'
+            assert odometry[ns].pose.pose.orientation.w == 1.0
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        for proc, log in procs:
+            proc.terminate()
+            proc.wait(20)
+            log.close()
+    for proc, _ in procs:
+        assert proc.returncode == 0, (tmp_path / 'robot1.log').read_text()[-2000:]
