@@ -14,8 +14,13 @@ setup(
         ('share/' + PACKAGE, ['package.xml']),
         ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
         ('share/' + PACKAGE + '/config/sweeps', glob('config/sweeps/*.yaml')),
+        ('share/' + PACKAGE + '/config/optimize', glob('config/optimize/*.yaml')),
+        ('share/' + PACKAGE + '/config/params', glob('config/params/*.yaml')),
+        ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools'],
+    # `pulsejet sweep|optimize --scheduler tcp://HOST:PORT | --dask-workers N`; pinned in requirements.txt
+    extras_require={'dask': ['dask[distributed]']},
     zip_safe=True,
     maintainer='pulsejet maintainers',
     maintainer_email='maintainers@pulsejet.dev',
