@@ -121,6 +121,9 @@ class ControllerNode(Node):
         self.last_time_s = None
         self.next_command_s = None
         self.commands_sent = 0
+        self._answer = None   # (state time, command) of the last closed-loop answer
+        self._volume_fresh = False   # a volume arrived since the last answer
+        self._pending = None         # a state's time waiting for its volume
         best_effort = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         if self.closed_loop:
             self.create_subscription(messages.message_class(messages.TOPIC_VELOCITY), messages.TOPIC_VELOCITY,
@@ -149,12 +152,28 @@ class ControllerNode(Node):
     def _on_volume(self, msg: Float64):
         if math.isfinite(msg.data):
             self.volume_m3 = float(msg.data)
+            self._volume_fresh = True
+            if self._pending is not None:      # the state came first: answer it now
+                t, self._pending = self._pending, None
+                self._answer_state(t)
 
     def _on_state(self, msg):
-        """Closed loop: answer this state (the volume of the same publication arrives before it)."""
+        """Closed loop: answer this state once the volume of the same publication is in (the two
+        topics may be taken in either order; the simulator publishes nothing else while it waits)."""
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        self._follow_time(t)
-        cmd = self.routine.command(t, self.volume_m3)
+        if self._volume_fresh:
+            self._answer_state(t)
+        else:
+            self._pending = t
+
+    def _answer_state(self, t):
+        self._volume_fresh = False
+        if self._answer is not None and t == self._answer[0]:
+            cmd = self._answer[1]          # a repeated state: the same answer, the routine not stepped twice
+        else:
+            self._follow_time(t)
+            cmd = self.routine.command(t, self.volume_m3)
+            self._answer = (t, cmd)
         self._pubs[messages.TOPIC_CMD_COMMAND].publish(messages.command_message(cmd, t))
         self.commands_sent += 1
 

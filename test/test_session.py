@@ -143,3 +143,12 @@ def test_idle_scene_closure_is_judged_against_the_energy_in_play():
     level, message, values = s.health(0.05)
     assert 'energy closure' not in message, message
     assert abs(values['energy_closure_relative']) < 0.05
+
+
+def test_closed_loop_does_not_apply_a_stale_answer():
+    s = make('closed_loop', control_period_s=0.05)
+    s.start(0.0)
+    s.accept({'pump_flow_m3_s': 1e-3, 'valve_opening': 0.0}, 0.1, stamp_s=0.0)
+    held = s.command
+    s.accept({'pump_flow_m3_s': 4e-3, 'valve_opening': 1.0}, 0.2, stamp_s=0.0)   # the t=0 state answered again
+    assert s.command == held

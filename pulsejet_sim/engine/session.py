@@ -345,6 +345,8 @@ class Session:
         """Apply a command: ``values`` maps Command fields to numbers, all checked first and applied
         together at the current step (or none, if one is bad: CommandError names it). In closed_loop
         pacing a command that answers the awaited state releases the next control period."""
+        stale = (self.config.pacing == 'closed_loop' and stamp_s is not None
+                 and stamp_s < self.sim.time_s - 0.5 * self.dt_s)
         checked = {}
         for name, value in values.items():
             if name not in Command.LIMITS:
@@ -352,6 +354,10 @@ class Session:
                                    f'{", ".join(Command.LIMITS)}')
             low, high = Command.LIMITS[name]
             checked[name] = check_command_value(name, value, low, high)
+        if stale:
+            # an answer to an earlier state (a repeated publication answered twice): applying it
+            # would make the closed loop depend on delivery timing
+            return self._take()
         self.command = dataclasses.replace(self.command, **checked)
         self._last_command_steps = self.sim.steps
         self._last_command_wall = now
