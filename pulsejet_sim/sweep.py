@@ -1,9 +1,11 @@
 """`pulsejet sweep`: a grid of scene variants run in parallel, one CSV row and one bar per run.
 
 Runs are submitted through a `concurrent.futures.Executor` (`submit` + `as_completed`): the local
-process pool is the default, and a cluster engine's executor (Dask's `distributed.Client` offers
-the same interface, Ray has one too) can take its place without touching scenes or models. Each
-run is a plain, picklable `RunSpec` evaluated by `run_one`, which imports no ROS.
+process pool is the default; `open_executor` also gives Dask's executor (`distributed.Client(...)
+.get_executor()`) on a running scheduler (`--scheduler tcp://HOST:PORT`) or on a local Dask
+cluster of worker processes (`--dask-workers N`), without touching scenes or models. Each run is a
+plain, picklable `RunSpec` evaluated by `run_one`, which imports no ROS. Dask (`dask[distributed]`)
+is imported only when one of those options is used.
 
 Sweep file (YAML)::
 
@@ -29,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures as futures
+import contextlib
 import csv
 import itertools
 import math
@@ -38,7 +41,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 import yaml
 
@@ -163,6 +166,60 @@ def local_executor(workers: int | None = None) -> futures.Executor:
                                        mp_context=multiprocessing.get_context('spawn'))
 
 
+@contextlib.contextmanager
+def open_executor(workers: int | None = None, scheduler: str | None = None,
+                  dask_workers: int | None = None) -> Iterator[futures.Executor]:
+    """The executor a sweep or an optimisation submits its runs to, closed on exit:
+
+    - scheduler='tcp://HOST:PORT': a running Dask scheduler (`dask scheduler` + `dask worker`, or
+      dask-jobqueue on SLURM); its workers need pulsejet importable (the same checkout installed);
+    - dask_workers=N: a local Dask cluster of N worker processes, one thread each;
+    - otherwise: the local process pool of `workers` processes (default: all cores).
+    Dask's executor is `Client.get_executor(pure=False)`: every submission runs (no deduplication).
+    """
+    if scheduler is not None and dask_workers is not None:
+        raise SweepError('--scheduler and --dask-workers exclude each other; allowed: one of them')
+    if scheduler is None and dask_workers is None:
+        executor = local_executor(workers)
+        try:
+            yield executor
+        finally:
+            executor.shutdown(cancel_futures=True)
+        return
+    try:
+        import distributed
+    except ImportError as err:   # the optional extra is missing
+        raise SweepError(f'Dask executor requested but dask.distributed is not installed ({err}); allowed: '
+                         'pip install "dask[distributed]" (pinned in requirements.txt)') from err
+    cluster = None
+    if dask_workers is not None:
+        if dask_workers < 1:
+            raise SweepError(f'--dask-workers {dask_workers} rejected; allowed: 1 or more')
+        cluster = distributed.LocalCluster(n_workers=dask_workers, threads_per_worker=1, processes=True,
+                                           dashboard_address=':0')
+        client = distributed.Client(cluster)
+    else:
+        try:
+            client = distributed.Client(scheduler, timeout='20s')
+        except (OSError, TimeoutError) as err:
+            raise SweepError(f'--scheduler {scheduler!r}: cannot connect ({err}); allowed: the address of a '
+                             'running dask scheduler, e.g. tcp://127.0.0.1:8786') from err
+    try:
+        yield client.get_executor(pure=False)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def executor_label(workers: int | None = None, scheduler: str | None = None, dask_workers: int | None = None) -> str:
+    if scheduler is not None:
+        return f'the Dask scheduler {scheduler}'
+    if dask_workers is not None:
+        return f'a local Dask cluster of {dask_workers} worker processes'
+    return f'{workers or os.cpu_count()} local processes'
+
+
 def run_sweep(runs: list[RunSpec], executor: futures.Executor | None = None, workers: int | None = None,
               progress=sys.stderr) -> list[RunRow]:
     """Run every spec through `executor` (default: a local process pool); rows in the runs' order."""
@@ -193,15 +250,18 @@ def _progress(stream, done: int, total: int, elapsed_s: float) -> None:
     stream.flush()
 
 
-def write_csv(rows: list[RunRow], path: Path) -> Path:
+def write_csv(rows: list[RunRow], path: Path, timing: bool = True) -> Path:
+    """One row per run. wall_s (the only column that differs between two runs of the same sweep) is
+    left out with timing=False, so the file is then reproducible byte for byte on any executor."""
     axes = sorted({a for r in rows for a in r.labels})
     with open(path, 'w', newline='') as fh:
         writer = csv.writer(fh)
-        writer.writerow(['run', 'study'] + axes + list(METRICS) + ['simulated_s', 'wall_s', 'fault'])
+        writer.writerow(['run', 'study'] + axes + list(METRICS) + ['simulated_s'] + (['wall_s'] if timing else [])
+                        + ['fault'])
         for r in rows:
             writer.writerow([r.name, r.study] + [r.labels.get(a, '') for a in axes]
                             + [repr(r.metrics[m]) if m in r.metrics else '' for m in METRICS]
-                            + [f'{r.simulated_s:.6g}', f'{r.wall_s:.3f}', r.fault])
+                            + [f'{r.simulated_s:.6g}'] + ([f'{r.wall_s:.3f}'] if timing else []) + [r.fault])
     return path
 
 
@@ -230,9 +290,15 @@ def plot_bars(rows: list[RunRow], metric: str, path: Path) -> Path:
 def main_sweep(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog='pulsejet sweep', description='Run a grid of scenes in parallel.')
     parser.add_argument('sweep', help='sweep YAML path or a name under config/sweeps/')
-    parser.add_argument('--workers', type=int, default=None, help='processes (default: all cores)')
+    parser.add_argument('--workers', type=int, default=None, help='local processes (default: all cores)')
+    parser.add_argument('--scheduler', default=None, metavar='tcp://HOST:PORT',
+                        help='run on this Dask scheduler (dask.distributed executor) instead of local processes')
+    parser.add_argument('--dask-workers', type=int, default=None, metavar='N',
+                        help='run on a local Dask cluster of N worker processes (one thread each)')
     parser.add_argument('--out', default='runs/sweeps', help='output folder for the CSV and the plot')
     parser.add_argument('--duration', type=float, default=None, help='override the sweep\'s duration_s')
+    parser.add_argument('--no-timing', action='store_true',
+                        help='leave the wall_s column out of the CSV (a reproducible file on any executor)')
     args = parser.parse_args(argv)
     try:
         meta, runs = load_sweep(args.sweep)
@@ -244,12 +310,23 @@ def main_sweep(argv: list[str]) -> int:
         return 2
     if args.duration is not None:
         runs = [RunSpec(r.study, r.labels, r.scene, r.overrides, args.duration, r.replace) for r in runs]
+    if args.dask_workers is not None and args.dask_workers < 1:
+        print(f'pulsejet sweep: --dask-workers {args.dask_workers} rejected; allowed: 1 or more', file=sys.stderr)
+        return 2
+    if args.scheduler is not None and args.dask_workers is not None:
+        print('pulsejet sweep: --scheduler and --dask-workers exclude each other; allowed: one of them', file=sys.stderr)
+        return 2
     print(f'{meta["name"]}: {len(runs)} runs of {runs[0].duration_s if runs else 0:g} s on '
-          f'{args.workers or os.cpu_count()} workers')
-    rows = run_sweep(runs, workers=args.workers)
+          f'{executor_label(args.workers, args.scheduler, args.dask_workers)}')
+    try:
+        with open_executor(args.workers, args.scheduler, args.dask_workers) as executor:
+            rows = run_sweep(runs, executor=executor)
+    except SweepError as err:
+        print(f'pulsejet sweep: {err}', file=sys.stderr)
+        return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    csv_path = write_csv(rows, out / f'{meta["name"]}.csv')
+    csv_path = write_csv(rows, out / f'{meta["name"]}.csv', timing=not args.no_timing)
     png_path = plot_bars(rows, meta['metric'], out / f'{meta["name"]}.png')
     ranked = sorted((r for r in rows if r.metrics), key=lambda r: -r.metrics[meta['metric']])
     print(f'top runs by {meta["metric"]}:')
@@ -262,5 +339,6 @@ def main_sweep(argv: list[str]) -> int:
     return 0
 
 
-__all__ = ['RunSpec', 'RunRow', 'run_one', 'load_sweep', 'run_sweep', 'local_executor', 'write_csv',
+__all__ = ['RunSpec', 'RunRow', 'run_one', 'load_sweep', 'run_sweep', 'local_executor', 'open_executor',
+           'executor_label', 'write_csv',
            'plot_bars', 'main_sweep', 'asdict']

@@ -14,7 +14,7 @@ import numpy as np
 from scipy import integrate
 
 from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import Command, ModelError, Observation, SimulationBlowUp
+from pulsejet_sim.models.base import VALVE_MIN_OPENING, Command, ModelError, Observation, SimulationBlowUp
 from pulsejet_sim.schema import Choice, Flag, Number, check_section
 
 TERM_BITS = {
@@ -34,6 +34,12 @@ SIMULATION_SPEC = {
     'dt_s': Number(1e-4, 1e-7, 0.1, unit='s'),
     'duration_s': Number(10.0, 0.0, 1e6, low_open=True, unit='s'),
     'publish_rate_hz': Number(100.0, 1.0, 10000.0, unit='Hz'),
+    # rk4: fixed step dt_s (with stability sub-steps), what HIL and bit-exact replays use;
+    # adaptive: Dormand-Prince 5(4) with error control (rtol, atol) and dense output; dt_s is then
+    # only the time grid of Simulation.step (lumped_kernels, "adaptive")
+    'integrator': Choice('rk4', ('rk4', 'adaptive')),
+    'rtol': Number(1e-6, 1e-13, 1e-2, unit='(relative tolerance, adaptive only)'),
+    'atol': Number(1e-9, 1e-16, 1e-2, unit='(absolute tolerance, adaptive only)'),
 }
 GEOMETRY_SPEC = {
     'length_m': Number(0.36, 0.0, 10.0, low_open=True, unit='m'),
@@ -140,6 +146,9 @@ class LumpedModel:
     terms: frozenset
     options: Mapping[str, Any]
     name: str = 'lumped'
+    integrator: str = 'rk4'
+    rtol: float = 1e-6
+    atol: float = 1e-9
 
     @classmethod
     def from_scene(cls, scene: Mapping[str, Any]) -> 'LumpedModel':
@@ -149,6 +158,9 @@ class LumpedModel:
                              f'description, routine, {", ".join(SECTION_SPECS)}')
         sections = {name: check_section(name, scene.get(name), spec) for name, spec in SECTION_SPECS.items()}
         g, m, f, act = sections['geometry'], sections['material'], sections['fluid'], sections['actuator']
+        if 0.0 < act['initial_valve_opening'] < VALVE_MIN_OPENING:   # 1/opening^2 overflows in the orifice loss
+            raise ModelError(f'actuator.initial_valve_opening: {act["initial_valve_opening"]!r} is out of range; '
+                             f'allowed: 0 (shut) or a finite number in [{VALVE_MIN_OPENING:g}, 1]')
         terms, opts = sections['terms'], sections['options']
         given_options = scene.get('options') or {}
         if opts['energy_model']:
@@ -203,9 +215,10 @@ class LumpedModel:
             flags |= K.O_ADDED_MASS_SIMPLIFIED
         p.setflags(write=False)
         command = Command(act['initial_pump_flow_m3_s'], act['initial_valve_opening'], 0.0)
-        return cls(params=p, flags=flags, dt_s=sections['simulation']['dt_s'], initial_b_m=b_init,
+        sim = sections['simulation']
+        return cls(params=p, flags=flags, dt_s=sim['dt_s'], initial_b_m=b_init,
                    initial_command=command, terms=frozenset(n for n in TERM_BITS if terms[n]),
-                   options=dict(opts))
+                   options=dict(opts), integrator=sim['integrator'], rtol=sim['rtol'], atol=sim['atol'])
 
     # ---- Model protocol ------------------------------------------------------------------------
     def initial_state(self) -> np.ndarray:
@@ -216,9 +229,55 @@ class LumpedModel:
         if y[K.Y_VALVE] <= 0.0:
             # a sealed cavity moves only with the pump
             y[K.Y_W] = y[K.Y_QP] / (8.0 / 3.0 * math.pi * self.params[K.P_A] * self.initial_b_m)
+        if self.integrator == 'adaptive':
+            # the step-size controller's memory travels with the state (K.M_*), after the NY slots
+            mem = np.zeros(K.NMEM)
+            mem[K.M_Q] = mem[K.M_VALVE] = np.nan    # no previous command: the first call starts afresh
+            y = np.concatenate([y, mem])
         return y
 
     def advance(self, state: np.ndarray, time_s: float, n_steps: int, command: Command) -> int:
+        if self.integrator == 'adaptive':
+            if n_steps <= 0:
+                return 0
+            self.advance_dense(state, time_s, n_steps * self.dt_s, command)
+            return int(n_steps)
+        return self._advance_rk4(state, time_s, n_steps, command)
+
+    def advance_dense(self, state: np.ndarray, time_s: float, duration_s: float, command: Command,
+                      t_out: np.ndarray | None = None, rtol: float | None = None, atol: float | None = None):
+        """Advance `state` (in place) by duration_s holding `command` with the adaptive integrator,
+        and return (states at time_s + t_out, stats): t_out increasing offsets in (0, duration_s]
+        (the publication times), the states by the integrator's dense output, one row each (K.NY
+        columns); stats: accepted and rejected steps, right-hand-side evaluations (K.S_*). Works on
+        an rk4 model's state too (its controller then starts afresh every call). Raises
+        SimulationBlowUp with the state at the last accepted step."""
+        t_out = np.empty(0) if t_out is None else np.ascontiguousarray(t_out, dtype=float)
+        out = np.empty((t_out.shape[0], K.NY))
+        stats = np.zeros(K.NSTATS)
+        if state.shape[0] >= K.NY + K.NMEM:
+            y = state[:K.NY]
+            mem = state[K.NY:K.NY + K.NMEM]
+        else:
+            y = state
+            mem = np.zeros(K.NMEM)
+            mem[K.M_Q] = mem[K.M_VALVE] = np.nan
+        args = (y, mem, self.params, float(command.pump_flow_m3_s), float(command.valve_opening),
+                float(duration_s), float(self.rtol if rtol is None else rtol),
+                float(self.atol if atol is None else atol), t_out, out, stats)
+        # the first call per term set compiles (or loads) the specialisation on a zero-length copy
+        warm = (y.copy(), mem.copy(), *args[2:5], 0.0, *args[6:8], np.empty(0), np.empty((0, K.NY)),
+                np.zeros(K.NSTATS))
+        status, written = K.specialised(K.adaptive_advance, self.flags, *warm)(self.flags, *args)
+        if status != K.OK:
+            t_fail = time_s + stats[K.S_T_DONE]
+            raise SimulationBlowUp(
+                f'lumped model (adaptive) stopped at t={t_fail:.6f} s: {_BLOWUP_CAUSES[status]} '
+                f'(b={y[K.Y_B]:.6g} m, db/dt={y[K.Y_W]:.6g} m/s, U={y[K.Y_U]:.6g} m/s); '
+                f'the state is kept at the last accepted step', t_fail)
+        return out[:written], stats
+
+    def _advance_rk4(self, state: np.ndarray, time_s: float, n_steps: int, command: Command) -> int:
         args = (state, self.params, float(command.pump_flow_m3_s), float(command.valve_opening),
                 int(n_steps), self.dt_s)
         done, status = K.specialised(K.advance, self.flags, *args[:4], 0, self.dt_s)(self.flags, *args) \

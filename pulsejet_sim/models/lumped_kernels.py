@@ -496,3 +496,289 @@ def specialised(dispatcher, flags: int, *args):
             fn = dispatcher
         _SPECIALISED[key] = fn
     return fn
+
+
+# ==== adaptive, error-controlled integrator ========================================================
+# Dormand-Prince 5(4) (Hairer, Norsett & Wanner, Solving ODEs I, II.5; the pair of DOPRI5 and
+# scipy's RK45): 7 stages, first-same-as-last, local extrapolation (the 5th-order solution is kept),
+# PI step-size control (Hairer & Wanner's DOPRI5 constants, beta = 0.04), and cubic Hermite dense
+# output from the end-point values and slopes (3rd order, exact at the step's ends) for outputs at
+# the publication rate. Piecewise-smooth inputs are handled by integrating segments on which they
+# are smooth: the caller's command is constant over a call and the valve moves linearly at its
+# stroke rate until it reaches the command (a kink), so the integration stops exactly at the kink and
+# the step-size controller restarts there and at every command change. When the valve reaches 0 the
+# cavity seals with the same jump (and the same valve-loss booking) as the fixed-step path.
+# The fixed-step RK4 path above is untouched.
+DP_C2, DP_C3, DP_C4, DP_C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
+DP_A21 = 1.0 / 5.0
+DP_A31, DP_A32 = 3.0 / 40.0, 9.0 / 40.0
+DP_A41, DP_A42, DP_A43 = 44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0
+DP_A51, DP_A52, DP_A53, DP_A54 = 19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0
+DP_A61, DP_A62, DP_A63, DP_A64, DP_A65 = (9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0,
+                                          -5103.0 / 18656.0)
+DP_B1, DP_B3, DP_B4, DP_B5, DP_B6 = 35.0 / 384.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0
+# error coefficients: 5th-order minus 4th-order weights
+DP_E1, DP_E3, DP_E4, DP_E5, DP_E6, DP_E7 = (71.0 / 57600.0, -71.0 / 16695.0, 71.0 / 1920.0,
+                                            -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0)
+ADAPT_SAFETY = 0.9
+ADAPT_FAC_MIN = 0.2
+ADAPT_FAC_MAX = 10.0
+ADAPT_BETA = 0.04               # PI part of the controller (0: classical I controller)
+ADAPT_MAX_STEPS = 10_000_000    # per call; beyond: ERR_SUBSTEPS
+ADAPT_H_MIN = 1e-12             # s; a step below it is a fault (stiffness out of range)
+# A valve closing on a moving flow is stiff like 1/opening near the end of its stroke, so the steps
+# shrink geometrically towards the instant it seals; the cavity is sealed this long before it (at an
+# opening of SEAL_SNAP_S x stroke rate, 2e-6 for a 50 ms stroke; the fixed step seals from dt x rate)
+SEAL_SNAP_S = 1e-7
+# step-memory slots appended to the state vector of an adaptive run (after the NY physical ones)
+M_H = 0            # next step size, s (0: restart the controller)
+M_ERR = 1          # previous accepted error norm (PI controller)
+M_Q = 2            # command of the previous call: a change restarts the controller
+M_VALVE = 3
+NMEM = 4
+
+# statistics returned by adaptive_advance
+S_ACCEPTED = 0
+S_REJECTED = 1
+S_RHS = 2
+S_T_DONE = 3       # time reached (s, from the call's start); < duration only on a fault
+NSTATS = 4
+
+
+@njit(cache=True)
+def _seal(flags, y, p):
+    """The valve seals a moving flow: the water in the nozzle stops and the shell follows the pump;
+    the kinetic energy this removes is booked as valve loss (as in the fixed-step path)."""
+    e_before = stored_energy(flags, y, p)
+    y[Y_VALVE] = 0.0
+    y[Y_W] = y[Y_QP] / (8.0 / 3.0 * math.pi * p[P_A] * y[Y_B])
+    e_after = stored_energy(flags, y, p)
+    y[Y_E_VALVE] += (e_before[3] - e_after[3])
+
+
+@njit(cache=True)
+def _err_norm(y0, y1, e, h, rtol, atol):
+    """RMS of the local error estimate h*sum(E_i k_i) scaled by atol + rtol*max(|y0|, |y1|)."""
+    s = 0.0
+    for i in range(N_INTEGRATED):
+        sc = atol + rtol * max(abs(y0[i]), abs(y1[i]))
+        r = h * e[i] / sc
+        s += r * r
+    return math.sqrt(s / N_INTEGRATED)
+
+
+@njit(cache=True)
+def _initial_step(flags, y, f0, valve, q_cmd, p, rtol, atol, span, tmp, f1, diag):
+    """Hairer, Norsett & Wanner's starting step (II.4): h0 from |y|/|f|, refined by one Euler probe."""
+    d0 = 0.0
+    d1 = 0.0
+    for i in range(N_INTEGRATED):
+        sc = atol + rtol * abs(y[i])
+        d0 += (y[i] / sc) ** 2
+        d1 += (f0[i] / sc) ** 2
+    d0 = math.sqrt(d0 / N_INTEGRATED)
+    d1 = math.sqrt(d1 / N_INTEGRATED)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, span)
+    for i in range(N_INTEGRATED):
+        tmp[i] = y[i] + h0 * f0[i]
+    rhs(flags, tmp, valve, q_cmd, p, f1, diag)
+    d2 = 0.0
+    for i in range(N_INTEGRATED):
+        sc = atol + rtol * abs(y[i])
+        d2 += ((f1[i] - f0[i]) / sc) ** 2
+    d2 = math.sqrt(d2 / N_INTEGRATED) / h0
+    if max(d1, d2) <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** 0.2
+    return min(100.0 * h0, h1, span)
+
+
+@njit(cache=True, inline='always')
+def _valve_at(v0, v_rate, dt):
+    v = v0 + v_rate * dt
+    return min(max(v, 0.0), 1.0)
+
+
+@njit(cache=True)
+def _segment(flags, y, p, q_cmd, v0, v_rate, t0, t1, snap, rtol, atol, mem, t_out, out, n_out_done, stats, ks,
+             tmp, y_old, diag):
+    """Integrate y from t0 to t1 with the valve at v0 + v_rate (t - t0) (a smooth segment); outputs
+    at the times t_out[j] in (t0, t1] by Hermite interpolation. The segment ends early once less than
+    `snap` seconds are left (a valve closing to 0: see SEAL_SNAP_S). Returns (status, outputs written,
+    time reached)."""
+    k1 = ks[0]
+    k2 = ks[1]
+    k3 = ks[2]
+    k4 = ks[3]
+    k5 = ks[4]
+    k6 = ks[5]
+    k7 = ks[6]
+    e = ks[7]
+    j = n_out_done
+    n_out = t_out.shape[0]
+    t = t0
+    if t1 - t0 <= snap or t1 <= t0:
+        stats[S_T_DONE] = t0
+        return OK, j, t0
+    rhs(flags, y, v0, q_cmd, p, k1, diag)
+    stats[S_RHS] += 1
+    h = mem[M_H]
+    if h <= 0.0:
+        h = _initial_step(flags, y, k1, v0, q_cmd, p, rtol, atol, t1 - t0, tmp, k2, diag)
+        stats[S_RHS] += 1
+        mem[M_ERR] = 1e-4
+    steps = 0
+    while t < t1 - snap:
+        last = False
+        if t + h >= t1 - (1e-9 + 1e-15 * abs(t1)):   # no sliver steps before a kink
+            h_step = t1 - t
+            last = True
+        else:
+            h_step = h
+        # stages (the valve position at each stage time)
+        for i in range(N_INTEGRATED):
+            tmp[i] = y[i] + h_step * DP_A21 * k1[i]
+        rhs(flags, tmp, _valve_at(v0, v_rate, t + DP_C2 * h_step - t0), q_cmd, p, k2, diag)
+        for i in range(N_INTEGRATED):
+            tmp[i] = y[i] + h_step * (DP_A31 * k1[i] + DP_A32 * k2[i])
+        rhs(flags, tmp, _valve_at(v0, v_rate, t + DP_C3 * h_step - t0), q_cmd, p, k3, diag)
+        for i in range(N_INTEGRATED):
+            tmp[i] = y[i] + h_step * (DP_A41 * k1[i] + DP_A42 * k2[i] + DP_A43 * k3[i])
+        rhs(flags, tmp, _valve_at(v0, v_rate, t + DP_C4 * h_step - t0), q_cmd, p, k4, diag)
+        for i in range(N_INTEGRATED):
+            tmp[i] = y[i] + h_step * (DP_A51 * k1[i] + DP_A52 * k2[i] + DP_A53 * k3[i] + DP_A54 * k4[i])
+        rhs(flags, tmp, _valve_at(v0, v_rate, t + DP_C5 * h_step - t0), q_cmd, p, k5, diag)
+        for i in range(N_INTEGRATED):
+            tmp[i] = y[i] + h_step * (DP_A61 * k1[i] + DP_A62 * k2[i] + DP_A63 * k3[i] + DP_A64 * k4[i]
+                                      + DP_A65 * k5[i])
+        v_end = _valve_at(v0, v_rate, t + h_step - t0)
+        rhs(flags, tmp, v_end, q_cmd, p, k6, diag)
+        for i in range(N_INTEGRATED):
+            tmp[i] = y[i] + h_step * (DP_B1 * k1[i] + DP_B3 * k3[i] + DP_B4 * k4[i] + DP_B5 * k5[i]
+                                      + DP_B6 * k6[i])
+        rhs(flags, tmp, v_end, q_cmd, p, k7, diag)
+        stats[S_RHS] += 6
+        for i in range(N_INTEGRATED):
+            e[i] = (DP_E1 * k1[i] + DP_E3 * k3[i] + DP_E4 * k4[i] + DP_E5 * k5[i] + DP_E6 * k6[i]
+                    + DP_E7 * k7[i])
+        err = _err_norm(y, tmp, e, h_step, rtol, atol)
+        if not math.isfinite(err):
+            err = 1e10
+        if err <= 1.0:
+            # accepted: dense output for the requested times inside (t, t + h]
+            t_new = t1 if last else t + h_step
+            while j < n_out and t_out[j] <= t_new:
+                s = (t_out[j] - t) / h_step
+                s = min(max(s, 0.0), 1.0)
+                h00 = (1.0 + 2.0 * s) * (1.0 - s) * (1.0 - s)
+                h10 = s * (1.0 - s) * (1.0 - s)
+                h01 = s * s * (3.0 - 2.0 * s)
+                h11 = s * s * (s - 1.0)
+                for i in range(N_INTEGRATED):
+                    out[j, i] = (h00 * y[i] + h10 * h_step * k1[i] + h01 * tmp[i] + h11 * h_step * k7[i])
+                out[j, Y_VALVE] = _valve_at(v0, v_rate, t_out[j] - t0)
+                j += 1
+            for i in range(NY):
+                y_old[i] = y[i]
+            for i in range(N_INTEGRATED):
+                y[i] = tmp[i]
+                k1[i] = k7[i]
+            y[Y_VALVE] = v_end
+            status = _check(y, p)
+            if status != OK:
+                for i in range(NY):
+                    y[i] = y_old[i]
+                stats[S_T_DONE] = t
+                return status, j, t
+            t = t_new
+            stats[S_ACCEPTED] += 1
+            err = max(err, 1e-10)
+            fac = ADAPT_SAFETY * err ** (-0.2 + 0.75 * ADAPT_BETA) * mem[M_ERR] ** ADAPT_BETA
+            fac = min(ADAPT_FAC_MAX, max(ADAPT_FAC_MIN, fac))
+            mem[M_ERR] = err
+            if not last:
+                h = h_step * fac
+            else:
+                # keep the step the controller wants for the next call (clipping at t1 is not a verdict)
+                h = max(h, h_step * fac)
+        else:
+            stats[S_REJECTED] += 1
+            fac = max(ADAPT_FAC_MIN, ADAPT_SAFETY * err ** -0.2)
+            h = h_step * min(fac, 1.0)
+        if h < ADAPT_H_MIN and t < t1 - snap:
+            stats[S_T_DONE] = t
+            return ERR_SUBSTEPS, j, t
+        steps += 1
+        if steps > ADAPT_MAX_STEPS:
+            stats[S_T_DONE] = t
+            return ERR_SUBSTEPS, j, t
+    mem[M_H] = h
+    stats[S_T_DONE] = t
+    return OK, j, t
+
+
+@njit(cache=True)
+def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats):
+    """Advance y (NY components) by `duration` seconds holding the command, adaptively; mem (NMEM)
+    carries the controller between calls. Writes the state at each t_out[j] in (0, duration]
+    (increasing) to out[j]. Returns (status, outputs written); stats: see S_*. On a fault y is the
+    last accepted state and stats[S_T_DONE] its time."""
+    ks = np.empty((8, NY))
+    tmp = np.empty(NY)
+    y_old = np.empty(NY)
+    diag = np.empty(ND)
+    for i in range(NSTATS):
+        stats[i] = 0.0
+    if q_cmd != mem[M_Q] or valve_cmd != mem[M_VALVE]:
+        mem[M_H] = 0.0          # a command change: the inputs jump, restart the controller
+        mem[M_Q] = q_cmd
+        mem[M_VALVE] = valve_cmd
+    n_written = 0
+    if not duration > 0.0:
+        return OK, n_written
+    v0 = y[Y_VALVE]
+    t = 0.0
+    if valve_cmd != v0 and abs(valve_cmd - v0) <= 1e-12 and not (valve_cmd <= 0.0 < v0):
+        y[Y_VALVE] = valve_cmd      # a round-off remainder of a ramp: no sliver segment
+        v0 = valve_cmd
+    if valve_cmd != v0:
+        rate = p[P_VALVE_RATE]
+        t_ramp = abs(valve_cmd - v0) / rate
+        if abs(t_ramp - duration) <= 1e-12 * duration:
+            t_ramp = duration       # the ramp ends with the call (round-off of the stroke arithmetic)
+        v_rate = rate if valve_cmd > v0 else -rate
+        t_end = min(t_ramp, duration)
+        snap = 0.0
+        if valve_cmd <= 0.0 and t_ramp <= duration:
+            snap = SEAL_SNAP_S
+        status, n_written, t = _segment(flags, y, p, q_cmd, v0, v_rate, 0.0, t_end, snap, rtol, atol, mem, t_out,
+                                        out, n_written, stats, ks, tmp, y_old, diag)
+        if status != OK:
+            return status, n_written
+        if t_ramp <= duration:
+            # the valve reached its command: a kink in the input, restart the controller there
+            mem[M_H] = 0.0
+            if valve_cmd <= 0.0 < v0:
+                _seal(flags, y, p)
+            else:
+                y[Y_VALVE] = valve_cmd
+            status = _check(y, p)
+            if status != OK:
+                stats[S_T_DONE] = t
+                return status, n_written
+    if t < duration:
+        status, n_written, t = _segment(flags, y, p, q_cmd, y[Y_VALVE], 0.0, t, duration, 0.0, rtol, atol, mem,
+                                        t_out, out, n_written, stats, ks, tmp, y_old, diag)
+        if status != OK:
+            return status, n_written
+    stats[S_T_DONE] = duration
+    return OK, n_written
+
+
+@njit(cache=True)
+def adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats):
+    """Entry point: specialise on the term set (see module docstring)."""
+    return _adaptive_advance(literally(flags), y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out,
+                             stats)

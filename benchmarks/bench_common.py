@@ -1,0 +1,34 @@
+"""Header (date, machine, CPU, Python, command) and writer of the stored benchmark tables."""
+from __future__ import annotations
+
+import datetime
+import os
+import platform
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / 'results'
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path('/proc/cpuinfo').read_text().splitlines():
+            if line.startswith('model name'):
+                return line.split(':', 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or 'unknown cpu'
+
+
+def header(title: str, command: str) -> str:
+    now = datetime.datetime.now(datetime.timezone.utc)
+    return (f'# {title}\n\n{now:%Y-%m-%d %H:%M UTC}, {platform.machine()}, {cpu_model()}, {os.cpu_count()} cores '
+            f'(shared with other jobs), Python {platform.python_version()}\n\ncommand: `.venv/bin/{command}`\n\n')
+
+
+def write(name: str, text: str) -> Path:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    path = RESULTS / f'{name}.md'
+    path.write_text(text)
+    print(text)
+    print(f'written to {path}')
+    return path

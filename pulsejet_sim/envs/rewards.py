@@ -1,0 +1,43 @@
+"""Rewards of the pulsejet environments (all SI), chosen by name. Each works on arrays, so the
+single and the vector environments share it.
+
+- ``distance``: metres swum forward during the control period, ``x(t+T) - x(t)``.
+- ``mean_speed``: mean forward speed over the control period, ``(x(t+T) - x(t)) / T`` (m/s).
+- ``cost_of_transport``: minus the increase of the running cost of transport, so that the episode's
+  return is minus the cost of transport of the whole episode (the sum telescopes):
+  ``CoT(t) = W_act(t) / (m g max(x(t) - x(0), d_min))``, ``W_act`` the actuation work put in since
+  the reset (the energy ledger's ``in_actuation_work``, J), ``m`` the vehicle's mass (lumped: solid
+  mass plus the water of the rest cavity; shell: ``vehicle.mass_kg``), ``g = 9.81 m/s^2``,
+  ``d_min`` (default 0.01 m) keeps it finite while the robot has not moved forward.
+- ``track_speed``: minus the absolute error of the mean speed over the period against
+  ``target_speed_m_s`` (m/s).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+G = 9.81
+REWARDS = ('distance', 'mean_speed', 'cost_of_transport', 'track_speed')
+
+
+def check_reward(name: str) -> str:
+    if name not in REWARDS:
+        raise ValueError(f'reward={name!r} rejected; allowed: one of {", ".join(REWARDS)}')
+    return name
+
+
+def cost_of_transport(work_j, distance_m, mass_kg, d_min_m):
+    return np.asarray(work_j) / (mass_kg * G * np.maximum(distance_m, d_min_m))
+
+
+def reward(name: str, *, x0, x1, x_start, work0, work1, period_s, mass_kg, target_speed_m_s, d_min_m):
+    """Reward of one control period (arrays or floats): positions before/after (m), the episode's
+    start position, actuation work before/after (J)."""
+    if name == 'distance':
+        return x1 - x0
+    if name == 'mean_speed':
+        return (x1 - x0) / period_s
+    if name == 'track_speed':
+        return -np.abs((x1 - x0) / period_s - target_speed_m_s)
+    return -(cost_of_transport(work1, x1 - x_start, mass_kg, d_min_m)
+             - cost_of_transport(work0, x0 - x_start, mass_kg, d_min_m))

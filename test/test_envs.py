@@ -1,0 +1,160 @@
+"""Gymnasium environments (issue 9): check_env, seeding, faults, the batched lumped kernel against
+single-robot runs, the 16384-robot vector env and the shell robots in worker processes."""
+import math
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import pulsejet_sim.envs as E
+from pulsejet_sim.envs.rewards import REWARDS
+from pulsejet_sim.models import lumped_batch as B
+from pulsejet_sim.models import lumped_kernels as K
+from pulsejet_sim.models.base import Command
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.simulation import Simulation
+
+
+def _check(env):
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')   # the checker's advice on infinite rate bounds, non-[-1, 1] actions
+        check_env(env.unwrapped, skip_render_check=True)
+
+
+def test_lumped_env_passes_check_env_and_is_registered():
+    assert E.LUMPED_ID in gym.registry and E.SHELL_ID in gym.registry
+    env = gym.make(E.LUMPED_ID)
+    _check(env)
+    assert env.observation_space.shape == (6,) and env.action_space.shape == (2,)
+    assert np.allclose(env.action_space.high, [Command.LIMITS['pump_flow_m3_s'][1], 1.0])
+
+
+def test_shell_env_passes_check_env():
+    env = gym.make(E.SHELL_ID, max_episode_s=0.2)
+    _check(env)
+    obs, _ = env.reset(seed=3)
+    total = 0
+    for k in range(4):
+        obs, reward, terminated, truncated, info = env.step(np.array([8.0]))
+        assert np.all(np.isfinite(obs)) and math.isfinite(reward) and not terminated
+        total += 1
+    assert truncated and info['actuation_work_j'] > 0.0
+
+
+@pytest.mark.parametrize('reward', REWARDS)
+def test_lumped_rewards_and_seeding(reward):
+    env = E.LumpedPumpValveEnv(reward=reward, max_episode_s=1.0)
+    actions = [np.array([2.5e-3, 0.0])] * 8 + [np.array([0.0, 1.0])] * 12
+
+    def episode(seed):
+        obs, _ = env.reset(seed=seed)
+        trace = [obs]
+        rewards = []
+        for a in actions:
+            obs, r, terminated, truncated, info = env.step(a)
+            trace.append(obs)
+            rewards.append(r)
+        return np.array(trace), np.array(rewards), truncated, info
+
+    t1, r1, truncated, info = episode(7)
+    t2, r2, _, _ = episode(7)
+    t3, _, _, _ = episode(8)
+    assert np.array_equal(t1, t2) and np.array_equal(r1, r2)     # a seed fixes the episode
+    assert not np.array_equal(t1[0], t3[0])                      # another seed another b(0)
+    assert truncated and np.all(np.isfinite(r1))
+    if reward == 'cost_of_transport':
+        # the return telescopes to minus the episode's cost of transport
+        assert math.isclose(r1.sum(), -info['cost_of_transport'], rel_tol=1e-9)
+        assert info['cost_of_transport'] > 0
+    if reward == 'distance':
+        assert math.isclose(r1.sum(), info['position_m'], rel_tol=1e-9) and info['position_m'] > 0
+
+
+def test_lumped_fault_terminates_with_penalty_not_nan():
+    env = E.LumpedPumpValveEnv(initial_b_jitter=0.0)
+    env.reset(seed=0)
+    for _ in range(40):   # 50 l/s into a sealed cavity: the shell outgrows its ellipsoid
+        obs, reward, terminated, truncated, info = env.step(np.array([0.05, 0.0]))
+        if terminated:
+            break
+    assert terminated and not truncated
+    assert reward == -env.fault_penalty and 'minor semi-axis' in info['fault']
+    assert np.all(np.isfinite(obs)) and env.observation_space.contains(obs)
+
+
+def test_batch_kernel_equals_single_robot_runs_bit_for_bit():
+    model = load_scene('pump_cycle').model
+    n = 4
+    Y = np.tile(model.initial_state(), (n, 1))
+    P = np.ascontiguousarray(np.tile(model.params, (n, 1)))
+    commands = [Command(2.5e-3, 0.0), Command(2.5e-3, 0.0), Command(0.0, 1.0), Command(1e-3, 0.3)]
+    q = np.array([c.pump_flow_m3_s for c in commands])
+    v = np.array([c.valve_opening for c in commands])
+    done = np.zeros(n, np.int64)
+    status = np.zeros(n, np.int64)
+    kernel = B.batch_kernel(model.flags)
+    for _ in range(3):
+        kernel(model.flags, Y, P, q, v, 700, model.dt_s, done, status)
+    assert np.all(status == K.OK) and np.all(done == 700)
+    for i, cmd in enumerate(commands):
+        sim = Simulation(model)
+        for _ in range(3):
+            sim.step(700, cmd)
+        assert np.array_equal(sim.state, Y[i]), i
+    assert np.array_equal(Y[0], Y[1])            # identical robots, identical trajectories
+    assert not np.array_equal(Y[0], Y[3]) and not np.array_equal(Y[2], Y[3])
+
+
+def test_vector_env_16384_robots_one_call():
+    env = E.LumpedPumpValveVectorEnv(16384, control_period_s=1e-3, reward='mean_speed', initial_b_jitter=0.0)
+    obs, _ = env.reset(seed=1)
+    assert obs.shape == (16384, 6)
+    actions = np.zeros((16384, 2))
+    actions[:, 0] = np.linspace(0.0, 5e-3, 16384)   # different pump flows per robot
+    for _ in range(3):
+        obs, reward, terminated, truncated, info = env.step(actions)
+    assert reward.shape == (16384,) and np.all(np.isfinite(reward)) and not terminated.any()
+    assert np.all(env.done == env.n_steps)
+    assert env.single_observation_space.contains(obs[0]) and env.observation_space.contains(obs)
+    # more pump flow, more water in the cavity
+    assert obs[-1, 3] > obs[0, 3]
+
+
+def test_vector_env_matches_single_env_and_autoresets():
+    kw = dict(initial_b_jitter=0.0, max_episode_s=0.15, reward='distance')
+    venv = E.LumpedPumpValveVectorEnv(2, **kw)
+    env = E.LumpedPumpValveEnv(**kw)
+    vobs, _ = venv.reset(seed=0)
+    obs, _ = env.reset(seed=0)
+    a = np.array([[2.5e-3, 0.0], [0.0, 1.0]])
+    for k in range(3):
+        vobs, vr, vterm, vtrunc, _ = venv.step(a)
+        obs, r, term, trunc, _ = env.step(a[0])
+        assert np.array_equal(vobs[0], obs) and vr[0] == r and vtrunc[0] == trunc
+    assert vtrunc.all()
+    vobs, vr, vterm, vtrunc, _ = venv.step(a)   # NEXT_STEP autoreset: back to the initial state
+    assert np.array_equal(vobs[0], env.reset()[0]) and np.all(vr == 0.0)
+
+
+def test_shell_robots_in_worker_processes():
+    venv = E.make_shell_vector_env(2, max_episode_s=0.1)
+    try:
+        obs, _ = venv.reset(seed=[1, 2])
+        assert obs.shape == (2, 5)
+        assert not np.array_equal(obs[0], obs[1])   # seeds 1 and 2: different wall perturbations
+        obs, reward, terminated, truncated, info = venv.step(np.array([[8.0], [0.0]]))
+        assert np.all(np.isfinite(reward)) and not terminated.any()
+        assert obs[0, 4] == 8.0 and obs[1, 4] == 0.0
+    finally:
+        venv.close()
+
+
+def test_bad_env_arguments_refused():
+    with pytest.raises(ValueError, match='reward'):
+        E.LumpedPumpValveEnv(reward='fastest')
+    with pytest.raises(ValueError, match='whole multiple'):
+        E.LumpedPumpValveEnv(control_period_s=0.00015)
+    with pytest.raises(ValueError, match='integrator: rk4'):
+        E.LumpedPumpValveVectorEnv(2, scene_overrides={'simulation': {'integrator': 'adaptive'}})
