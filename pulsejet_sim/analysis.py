@@ -82,7 +82,12 @@ def summarize(path: str | Path) -> dict[str, Any]:
         name = find_topic(series, rel)
         return series[name] if name else None
 
-    out: dict[str, Any] = {'file': str(p), 'truncated': info.truncated}
+    out: dict[str, Any] = {'file': str(p), 'truncated': info.truncated, 'damage': info.damage_report(),
+                           'messages_recovered': info.message_count, 'bytes_dropped': info.bytes_dropped,
+                           'file_bytes': info.file_size, 'corrupt_chunks': info.corrupt_chunks,
+                           'undecodable_messages': dict(info.undecodable),
+                           'log_span_s': (None if info.first_log_ns is None else
+                                          (info.first_log_ns * 1e-9, info.last_log_ns * 1e-9))}
     # Simulation-time span: header-stamped topics are exact, /clock next, log-time-mapped ones last.
     span = None
     for group in ((VELOCITY, THRUST), ('/clock',), (MANTLE_RADIUS, VOLUME, FLUID_MASS)):
@@ -146,7 +151,11 @@ def format_summary(summary: dict[str, Any]) -> str:
     ]
     width = max(len(r[0]) for r in rows)
     lines = [f'{name:<{width}}  {value} {unit}'.rstrip() for name, value, unit in rows]
-    if summary.get('truncated'):
+    if summary.get('damage'):
+        lines.append(f'{"damaged":<{width}}  {summary["damage"]}')
+        lines.append(f'{"":<{width}}  read up to the last complete chunk (a hard kill loses at most the '
+                     'writer\'s last flush period); `pulsejet repair FILE` writes a complete copy')
+    elif summary.get('truncated'):
         lines.append(f'{"note":<{width}}  file has no summary (writer killed hard); '
                      'read up to the last complete chunk')
     lines.append('')

@@ -1,5 +1,6 @@
 """`pulsejet`: offline tools. `pulsejet run SCENE`, `pulsejet summary FILE.mcap`, `pulsejet plot FILE.mcap`,
-`pulsejet resim FILE.mcap`, `pulsejet sweep SWEEP`, `pulsejet fit FIT`, `pulsejet scenes`."""
+`pulsejet resim FILE.mcap`, `pulsejet repair FILE.mcap`, `pulsejet sweep SWEEP`, `pulsejet fit FIT`,
+`pulsejet optimize OPT`, `pulsejet scenes`."""
 from __future__ import annotations
 
 import argparse
@@ -55,14 +56,19 @@ def _lazy(module: str, function: str):
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     commands = {'run': _run, 'summary': _lazy('analysis', 'main_summary'), 'plot': _lazy('analysis', 'main_plot'),
-                'resim': _lazy('resim', 'main_resim'), 'sweep': _lazy('sweep', 'main_sweep'),
-                'fit': _lazy('fit', 'main_fit'), 'scenes': _scenes}
+                'resim': _lazy('resim', 'main_resim'), 'repair': _lazy('bag.repair', 'main_repair'),
+                'sweep': _lazy('sweep', 'main_sweep'),
+                'fit': _lazy('fit', 'main_fit'), 'optimize': _lazy('optimize', 'main_optimize'),
+                'scenes': _scenes}
     if not argv or argv[0] in ('-h', '--help') or argv[0] not in commands:
         if argv and argv[0] not in ('-h', '--help'):
             print(f'pulsejet: unknown command {argv[0]!r}; allowed: {", ".join(commands)}', file=sys.stderr)
         print('usage: pulsejet {run SCENE [--duration S] [--out FILE.mcap] | summary FILE.mcap | '
               'plot FILE.mcap [--out PNG] | resim FILE.mcap [--scene S] [--tolerance T] | '
-              'sweep SWEEP.yaml [--workers N] [--out DIR] | fit FIT.yaml [--out DIR] [--max-evals N] | scenes}', file=sys.stderr)
+              'repair FILE.mcap [--out NEW.mcap] | '
+              'sweep SWEEP.yaml [--workers N | --dask-workers N | --scheduler tcp://HOST:PORT] [--out DIR] '
+              '[--no-timing] | fit FIT.yaml [--out DIR] [--max-evals N] | optimize OPT.yaml [--out DIR] '
+              '[--max-evals N] [--workers N | --dask-workers N | --scheduler tcp://HOST:PORT] | scenes}', file=sys.stderr)
         return 0 if argv and argv[0] in ('-h', '--help') else 2
     return int(commands[argv[0]](argv[1:]) or 0)
 

@@ -62,6 +62,7 @@ CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 MAX_SLEEP_S = 0.05        # longest single sleep: a stop request is seen within this time
 ACK_TIMEOUT_S = 2.0       # at exit, wait at most this long for subscribers to acknowledge
 MIN_PASS_S = 0.01         # a looping pass lasts at least this long (a one-instant file does not spin)
+MAX_CLOCK_TICKS = 10_000_000   # generated /clock ticks per pass (a damaged log time must not exhaust memory)
 PARAMETERS = ('bag', 'rate', 'loop', 'start_offset_s', 'topics', 'publish_clock', 'clock_rate_hz',
               'wait_for_topics', 'delay_s')
 
@@ -91,6 +92,7 @@ class Recording:
     first_ns: int
     last_ns: int
     truncated: bool = False
+    damage: str = ''                                 # BagInfo.damage_report() of the file ('' when intact)
 
     @property
     def has_clock(self) -> bool:
@@ -187,9 +189,12 @@ def load_recording(path: str | Path) -> Recording:
     info = BagInfo(Path(path))
     messages = [(m.log_time_ns, m.topic, bytes(m.msg)) for m in iter_bag(path, info=info, decode=False)]
     if not messages:
-        raise ConfigError(f'bag={str(path)!r} rejected: it holds no messages; allowed: a recording with messages')
+        damage = info.damage_report()
+        raise ConfigError(f'bag={str(path)!r} rejected: it holds no readable messages'
+                          f'{" (" + damage + ")" if damage else ""}; allowed: a recording with messages')
     messages.sort(key=lambda m: m[0])
-    return Recording(Path(path), messages, dict(info.topics), messages[0][0], messages[-1][0], info.truncated)
+    return Recording(Path(path), messages, dict(info.topics), messages[0][0], messages[-1][0], info.truncated,
+                     info.damage_report())
 
 
 def build_schedule(rec: Recording, cfg: ReplayConfig) -> Schedule:
@@ -220,6 +225,11 @@ def build_schedule(rec: Recording, cfg: ReplayConfig) -> Schedule:
         # one tick per 1/clock_rate_hz of wall time, i.e. every rate/clock_rate_hz of log time,
         # and one at the very end, so the clock reaches the last log time
         period_ns = max(1, int(round(cfg.rate / cfg.clock_rate_hz * 1e9)))
+        if duration_ns // period_ns > MAX_CLOCK_TICKS:
+            raise ConfigError(f'clock_rate_hz={cfg.clock_rate_hz!r} rejected for {str(rec.path)!r}: its log times span '
+                              f'{duration_ns * 1e-9:.6g} s, which needs {duration_ns // period_ns} generated /clock '
+                              f'ticks; allowed: at most {MAX_CLOCK_TICKS} (lower clock_rate_hz, publish_clock:=false, '
+                              'or repair/trim a file with a damaged log time)')
         ticks = list(range(0, duration_ns + 1, period_ns))
         if not ticks or ticks[-1] != duration_ns:
             ticks.append(duration_ns)
@@ -432,9 +442,9 @@ def main(args: Sequence[str] | None = None) -> int:
     spinner.start()
     clock_note = ('recorded /clock' if recording.has_clock and cfg.publish_clock
                   else 'generated /clock at %g Hz' % cfg.clock_rate_hz if schedule.generated_clock else 'no /clock')
-    if recording.truncated:
-        print(f'replay: warning: {cfg.bag} was cut short (writer killed); playing what is complete',
-              file=sys.stderr, flush=True)
+    if recording.truncated or recording.damage:
+        print(f'replay: warning: {cfg.bag} is damaged ({recording.damage or "cut short, writer killed"}); '
+              'playing what is complete', file=sys.stderr, flush=True)
     print(f'replay: playing {cfg.bag}: {len(schedule.events)} messages on {len(player.publishers)} topics, '
           f'{schedule.duration_ns * 1e-9:.3f} s at rate {cfg.rate:g} ({schedule.wall_duration_s(cfg.rate):.3f} s), '
           f'{clock_note}{", looping" if cfg.loop else ""}', flush=True)

@@ -40,7 +40,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, find_topic, iter_bag, stamp_to_s
-from pulsejet_sim.models.base import Command, SimulationBlowUp
+from pulsejet_sim.models.base import Command, CommandError, SimulationBlowUp
 
 APPLIED_COMMAND = 'pulsejet/applied_command'
 VELOCITY = 'pulsejet/velocity'
@@ -125,7 +125,12 @@ def _command_from_joint_state(msg: Any) -> tuple[float, Command]:
     if missing:
         raise ResimError(f'applied command with names {list(msg.name)!r} lacks {missing}; '
                          f'expected names {list(APPLIED_NAMES)}')
-    return stamp_to_s(msg.header.stamp), Command(*(float(values[n]) for n in APPLIED_NAMES))
+    t = stamp_to_s(msg.header.stamp)
+    try:
+        command = Command(*(float(values[n]) for n in APPLIED_NAMES)).validate()
+    except (CommandError, TypeError, ValueError) as err:
+        raise ResimError(f'applied command at t={t:.9g} s refused: {err}') from None
+    return t, command
 
 
 def read_applied_commands(path: str | Path) -> list[tuple[float, Command]]:
@@ -210,24 +215,28 @@ def read_recorded_states(path: str | Path) -> RecordedStates:
 
 
 def stored_scene(path: str | Path) -> Any | None:
-    """The scene stored in the file's `pulsejet` metadata record (scene_yaml or scene), or None."""
-    from mcap.records import Metadata
-    from mcap.stream_reader import StreamReader
-    from pulsejet_sim.scene import load_scene, scene_from_dict
-    import yaml
-    found: dict[str, str] = {}
-    with open(path, 'rb') as fh:
-        try:
-            for record in StreamReader(fh, skip_magic=False, record_size_limit=1 << 31).records:
-                if isinstance(record, Metadata) and record.name == METADATA_NAME:
-                    found.update(record.metadata)
-        except Exception:   # a truncated tail: whatever was found before it
-            pass
-    if 'scene_yaml' in found:
-        data = yaml.safe_load(found['scene_yaml'])
-        return scene_from_dict(data, name=str(data.get('name', found.get('scene', 'stored'))))
-    if 'scene' in found:
-        return load_scene(found['scene'])
+    """The scene stored in the file's `pulsejet` metadata record, or None.
+
+    The record is untrusted data: `scene_yaml` is parsed with the safe YAML loader and validated like
+    a scene file (nothing in it is executed, no file it names is opened); `scene` alone is used only
+    when it is a bare scene name under config/ (a path, absolute or relative, is never followed).
+    ResimError names what was refused."""
+    from pulsejet_sim.bag.reader import read_metadata
+    from pulsejet_sim.scene import SceneError, is_project_scene_name, load_scene, scene_from_stored
+    from pulsejet_sim.schema import show
+    found = read_metadata(path, METADATA_NAME)
+    try:
+        if 'scene_yaml' in found:
+            name = found.get('scene', 'stored')
+            return scene_from_stored(found['scene_yaml'], name if isinstance(name, str) and name else 'stored')
+        if 'scene' in found:
+            if not is_project_scene_name(found['scene']):
+                raise ResimError(f'{str(path)!r}: stored scene {show(found["scene"])} is not a scene name under '
+                                 'config/ (paths stored in a recording are not followed); pass --scene NAME or '
+                                 'a YAML path you trust')
+            return load_scene(found['scene'])
+    except SceneError as err:
+        raise ResimError(f'{str(path)!r}: the scene stored in the recording is refused: {err}; pass --scene') from None
     return None
 
 
@@ -242,7 +251,10 @@ def _resolve_scene(bag_path: Path, scene: Any, dt_s: float | None) -> Any:
         if overrides is None:
             return stored
         from pulsejet_sim.scene import merge, scene_from_dict
-        return scene_from_dict(merge(stored.data, overrides), name=stored.name, path=stored.path)
+        try:
+            return scene_from_dict(merge(stored.data, overrides), name=stored.name, path=stored.path)
+        except SceneError as err:
+            raise ResimError(str(err)) from None
     if isinstance(scene, (str, Path)):
         try:
             return load_scene(scene, overrides)
@@ -299,7 +311,11 @@ def resimulate(bag_path: str | Path, scene: Any = None, *, commands: Iterable[tu
     for rel, items in states.values.items():
         result.topics[rel] = TopicComparison(rel, recorded=len(items))
         for t, v in items:
+            if not (math.isfinite(t) and t >= 0):
+                result.warnings.append(f'{rel} at t={t!r} s: not a simulation time; not compared')
+                continue
             targets.setdefault(int(round(t / dt)), []).append((rel, v, t))
+    _check_span(path, sorted(set(targets) | set(cmd_at)), dt)
     for rel in COMPARED_TOPICS:
         if rel not in result.topics:
             result.warnings.append(f'no {rel} recorded: not compared')
@@ -348,6 +364,27 @@ def resimulate(bag_path: str | Path, scene: Any = None, *, commands: Iterable[tu
     return result
 
 
+MAX_GAP_S = 3600.0            # sim time between two recorded instants beyond which the file is refused
+MAX_STEPS = 2_000_000_000    # physics steps a re-simulation may take
+
+
+def _check_span(path: Path, steps: list[int], dt: float) -> None:
+    """Refuse a recording whose times would make the re-simulation run for ever: a damaged stamp
+    (e.g. t = 1e9 s in a 10 s run) far beyond the other recorded instants, or a span beyond MAX_STEPS."""
+    if not steps:
+        return
+    if steps[-1] > MAX_STEPS:
+        raise ResimError(f'{str(path)!r}: a recorded time of {steps[-1] * dt:.6g} s needs {steps[-1]} physics steps; '
+                         f'allowed: at most {MAX_STEPS} steps (dt {dt:g} s); the file looks damaged')
+    prev = 0
+    for step in steps:
+        if (step - prev) * dt > MAX_GAP_S:
+            raise ResimError(f'{str(path)!r}: recorded time {step * dt:.6g} s follows {prev * dt:.6g} s with nothing '
+                             f'recorded in between; allowed: gaps up to {MAX_GAP_S:g} s of simulation time '
+                             '(a damaged stamp?)')
+        prev = step
+
+
 # ---- CLI ------------------------------------------------------------------------------------------
 def _float_above(low: float, inclusive: bool):
     """argparse type: a finite float > low (>= low when inclusive), or a message saying what is allowed."""
@@ -381,13 +418,14 @@ def main_resim(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--tolerance', type=_nonneg_float, default=0.0,
                         help='largest allowed max |error| per topic (default 0: bit-identical)')
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    from pulsejet_sim.scene import SceneError
     if args.out is not None and Path(args.out).resolve() == Path(args.file).resolve():
         print(f'pulsejet resim: --out {args.out!r} rejected; allowed: a path other than the input file',
               file=sys.stderr)
         return 2
     try:
         result = resimulate(args.file, args.scene, out=args.out, dt_s=args.dt)
-    except (ResimError, BagReadError) as err:
+    except (ResimError, BagReadError, SceneError) as err:
         print(f'pulsejet resim: {err}', file=sys.stderr)
         return 2
     print(result.format_table())

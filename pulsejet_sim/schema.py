@@ -1,15 +1,140 @@
 """A small declarative checker for scene sections: every key known, every value typed and in range.
 
 Errors name the key (dotted path), the bad value and what is allowed, so a user can fix a scene
-file from the message alone.
+file from the message alone. Values are shown shortened (show()): a message never carries a
+whole file back.
+
+safe_load_yaml() is the one way pulsejet reads a YAML file it did not write (scenes, sweeps, fits,
+the scene stored in a recording): yaml.SafeLoader only (no Python tags, nothing executed), at most
+MAX_YAML_BYTES, and refused when its aliases expand to more than MAX_YAML_NODES values, nest deeper
+than MAX_YAML_DEPTH levels or refer to themselves (a "billion laughs" file would otherwise hang or
+exhaust memory in whatever walks the data).
 """
 from __future__ import annotations
 
 import math
+import reprlib
 from dataclasses import dataclass
 from typing import Any, Mapping
 
+import yaml
+
 from pulsejet_sim.models.base import ModelError
+
+MAX_YAML_BYTES = 1 << 20          # 1 MiB: a scene is a few kB, a sweep or fit some tens of kB
+MAX_YAML_NODES = 100_000          # values after alias expansion
+MAX_YAML_DEPTH = 64               # nesting levels
+
+_SHOW = reprlib.Repr()
+_SHOW.maxstring = 60
+_SHOW.maxother = 60
+_SHOW.maxlist = _SHOW.maxtuple = _SHOW.maxdict = _SHOW.maxset = 6
+_SHOW.maxlevel = 3
+
+
+def show(value: Any) -> str:
+    """repr() of a value, shortened to a line (long strings, big or nested containers, recursion)."""
+    try:
+        return _SHOW.repr(value)
+    except Exception:   # a value whose repr fails
+        return f'<{type(value).__name__}>'
+
+
+class YAMLInputError(ValueError):
+    """A YAML text that is not valid, too large or too deeply aliased (the message names the file)."""
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
+
+
+def _check_graph(root: yaml.Node, what: str) -> None:
+    """Refuse a composed YAML graph whose expansion is too big, too deep or cyclic."""
+    memo: dict[int, int] = {}
+    on_path: set[int] = set()
+    stack: list[tuple[yaml.Node, int, bool]] = [(root, 1, False)]
+    while stack:
+        node, depth, done = stack.pop()
+        key = id(node)
+        if done:
+            on_path.discard(key)
+            memo[key] = min(1 + sum(memo[id(c)] for c in _children(node)), MAX_YAML_NODES + 1)
+            if memo[key] > MAX_YAML_NODES:
+                raise YAMLInputError(f'{what}: expands to more than {MAX_YAML_NODES} values through its '
+                                     f'aliases; allowed: a plain scene/sweep file (a YAML bomb is refused)')
+            continue
+        if key in memo:
+            continue
+        if key in on_path:
+            raise YAMLInputError(f'{what}: an alias refers to a value containing itself (line '
+                                 f'{node.start_mark.line + 1}); allowed: non-recursive YAML')
+        if depth > MAX_YAML_DEPTH:
+            raise YAMLInputError(f'{what}: nested deeper than {MAX_YAML_DEPTH} levels (line '
+                                 f'{node.start_mark.line + 1}); allowed: at most {MAX_YAML_DEPTH}')
+        on_path.add(key)
+        stack.append((node, depth, True))
+        for child in _children(node):
+            if id(child) in on_path:
+                raise YAMLInputError(f'{what}: an alias refers to a value containing itself (line '
+                                     f'{child.start_mark.line + 1}); allowed: non-recursive YAML')
+            if id(child) not in memo:
+                stack.append((child, depth + 1, False))
+
+
+def safe_load_yaml(text: str | bytes, what: str) -> Any:
+    """Parse one YAML document with yaml.SafeLoader and the limits above; YAMLInputError names `what`."""
+    if isinstance(text, bytes):
+        if len(text) > MAX_YAML_BYTES:
+            raise YAMLInputError(f'{what}: {len(text)} bytes; allowed: at most {MAX_YAML_BYTES} bytes of YAML')
+        try:
+            text = text.decode('utf-8')
+        except UnicodeDecodeError as err:
+            raise YAMLInputError(f'{what}: not UTF-8 text (byte {err.start}); allowed: a UTF-8 YAML file') from None
+    if not isinstance(text, str):
+        raise YAMLInputError(f'{what}: {type(text).__name__} given; allowed: YAML text')
+    if len(text) > MAX_YAML_BYTES:
+        raise YAMLInputError(f'{what}: {len(text)} characters; allowed: at most {MAX_YAML_BYTES} of YAML')
+    try:
+        loader = yaml.SafeLoader(text)
+    except yaml.YAMLError as err:   # the reader refuses control characters up front
+        detail = ' '.join(str(err).split())
+        raise YAMLInputError(f'{what}: not valid YAML ({detail[:300]}); allowed: one well-formed YAML document') from None
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_graph(node, what)
+        return loader.construct_document(node)
+    except yaml.YAMLError as err:
+        detail = ' '.join(str(err).split())
+        raise YAMLInputError(f'{what}: not valid YAML ({detail[:300]}); allowed: one well-formed YAML document') from None
+    except RecursionError:
+        raise YAMLInputError(f'{what}: nested too deeply to parse; allowed: at most {MAX_YAML_DEPTH} levels') from None
+    finally:
+        loader.dispose()
+
+
+def read_yaml_file(path: Any, what: str | None = None) -> Any:
+    """safe_load_yaml() of a file, refusing one larger than MAX_YAML_BYTES before reading it."""
+    from pathlib import Path
+    p = Path(path)
+    what = what or f'file {str(p)!r}'
+    try:
+        size = p.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise YAMLInputError(f'{what}: {size} bytes; allowed: at most {MAX_YAML_BYTES} bytes of YAML')
+        with open(p, 'rb') as fh:
+            data = fh.read(MAX_YAML_BYTES + 1)
+    except (OSError, ValueError) as err:
+        if isinstance(err, YAMLInputError):
+            raise
+        reason = getattr(err, 'strerror', None) or str(err)
+        raise YAMLInputError(f'{what}: cannot be read ({reason}); allowed: a readable YAML file') from None
+    return safe_load_yaml(data, what)
 
 
 @dataclass(frozen=True)
@@ -22,11 +147,11 @@ class Number:
 
     def check(self, key: str, value: Any) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ModelError(f'{key}: {value!r} is not a number; allowed: {self.allowed()}')
+            raise ModelError(f'{key}: {show(value)} is not a number; allowed: {self.allowed()}')
         v = float(value)
         too_low = v <= self.low if self.low_open else v < self.low
         if not math.isfinite(v) or too_low or v > self.high:
-            raise ModelError(f'{key}: {value!r} is out of range; allowed: {self.allowed()}')
+            raise ModelError(f'{key}: {show(value)} is out of range; allowed: {self.allowed()}')
         return v
 
     def allowed(self) -> str:
@@ -41,7 +166,7 @@ class Flag:
 
     def check(self, key: str, value: Any) -> bool:
         if not isinstance(value, bool):
-            raise ModelError(f'{key}: {value!r} is not a boolean; allowed: true or false')
+            raise ModelError(f'{key}: {show(value)} is not a boolean; allowed: true or false')
         return value
 
 
@@ -51,8 +176,8 @@ class Choice:
     choices: tuple[str, ...]
 
     def check(self, key: str, value: Any) -> str:
-        if value not in self.choices:
-            raise ModelError(f'{key}: {value!r} is not allowed; allowed: one of {", ".join(self.choices)}')
+        if not isinstance(value, str) or value not in self.choices:
+            raise ModelError(f'{key}: {show(value)} is not allowed; allowed: one of {", ".join(self.choices)}')
         return value
 
 
@@ -62,7 +187,7 @@ class Text:
 
     def check(self, key: str, value: Any) -> str:
         if not isinstance(value, str):
-            raise ModelError(f'{key}: {value!r} is not a string; allowed: text')
+            raise ModelError(f'{key}: {show(value)} is not a string; allowed: text')
         return value
 
 
@@ -71,10 +196,11 @@ def check_section(section: str, given: Any, spec: Mapping[str, Any]) -> dict[str
     if given is None:
         given = {}
     if not isinstance(given, Mapping):
-        raise ModelError(f'{section}: {given!r} is not a mapping; allowed keys: {", ".join(spec)}')
+        raise ModelError(f'{section}: {show(given)} is not a mapping; allowed keys: {", ".join(spec)}')
     unknown = [k for k in given if k not in spec]
     if unknown:
-        raise ModelError(f'{section}.{unknown[0]}: unknown key; allowed keys: {", ".join(spec)}')
+        raise ModelError(f'{section}.{show(unknown[0]) if not isinstance(unknown[0], str) else unknown[0][:60]}: '
+                         f'unknown key (value {show(given[unknown[0]])}); allowed keys: {", ".join(spec)}')
     out: dict[str, Any] = {}
     for key, rule in spec.items():
         path = f'{section}.{key}'

@@ -8,9 +8,14 @@ summary (schemas, channels, statistics, chunk indexes) and a `rosbag2` metadata 
 Crash safety:
 - close() is idempotent and also runs at interpreter exit;
 - install_signal_handlers(writer) closes the file on SIGINT/SIGTERM before the process exits;
-- chunks are bounded in size and age (flush_period_s) and flushed to the OS, so a hard kill
-  (SIGKILL, power loss aside) loses at most the open chunk; bag.reader reads such a truncated
-  file up to its last complete chunk and bag.reader.repair() rewrites it into a complete one.
+- chunks are bounded in size and age: a message is in a closed chunk handed to the OS at most
+  flush_period_s after it was written (checked on every write and by a background thread while
+  the writer is idle), so a hard kill (SIGKILL; power loss aside) loses at most the messages of
+  the last flush_period_s; bag.reader reads such a truncated file up to its last complete chunk
+  and `pulsejet repair` (bag.repair) rewrites it into a complete one with all its metadata.
+
+Format: the MCAP header's library field carries `pulsejet-format=<FORMAT_VERSION>`; a reader refuses
+a recording of a newer format with a clear message (bag.reader.FORMAT_VERSION).
 
 Topic names are stored fully qualified like rosbag2 ('pulsejet/velocity' -> '/pulsejet/velocity').
 """
@@ -33,8 +38,9 @@ import yaml
 from mcap.writer import CompressionType, Writer
 
 from pulsejet_sim.bag import msgdefs
+from pulsejet_sim.bag.reader import FORMAT_VERSION
 
-LIBRARY = 'pulsejet_sim.bag (rosbag2_storage_mcap layout)'
+LIBRARY = f'pulsejet_sim.bag pulsejet-format={FORMAT_VERSION} (rosbag2_storage_mcap layout)'
 COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE}
 
 
@@ -93,12 +99,25 @@ class BagWriter:
         self._first_ns: int | None = None
         self._last_ns: int | None = None
         self._last_flush = time.monotonic()
+        self._pending_since: float | None = None      # monotonic time of the oldest unflushed message
         self._closed = False
         self._busy_thread: int | None = None          # thread id inside write(), for signal deferral
         self._pending_signal: int | None = None
         # Close at interpreter exit too (sys.exit, an uncaught exception), without keeping self alive.
         self._atexit = _weak_close(self)
         atexit.register(self._atexit)
+        # An idle writer (no write() to trigger the flush) still flushes within flush_period_s.
+        self._stop_flusher = threading.Event()
+        self._flusher = threading.Thread(target=_flush_loop, args=(weakref.ref(self), self._stop_flusher,
+                                                                   self._tick_s()),
+                                         name=f'bag-flush:{self.path.name}', daemon=True)
+        self._flusher.start()
+
+    def _tick_s(self) -> float:
+        return min(max(self.flush_period_s / 10.0, 0.005), 0.5)
+
+    def _flush_due(self, now: float) -> bool:
+        return self._pending_since is not None and now - self._pending_since >= self.flush_period_s - self._tick_s()
 
     # -- context manager ------------------------------------------------------------------------
     def __enter__(self) -> 'BagWriter':
@@ -126,11 +145,13 @@ class BagWriter:
 
     # -- writing --------------------------------------------------------------------------------
     def add_topic(self, topic: str, type_name: str, offered_qos_profiles: str = '',
-                  definition: str | None = None) -> str:
+                  definition: str | None = None, channel_metadata: dict[str, str] | None = None) -> str:
         """Register a topic (idempotent for the same type); returns the qualified name.
 
         offered_qos_profiles: the YAML rosbag2 stores (see qos_profiles_yaml); '' when unknown.
         definition: complete ros2msg text to store instead of the installed one (used by repair()).
+        channel_metadata: the channel's metadata to store verbatim (repair: every key of the damaged
+        file's channel, `offered_qos_profiles` and `topic_type_hash` included) instead of the computed one.
         Raises BagError for a topic re-added with another type, MessageDefinitionError when the
         type's .msg files are not installed.
         """
@@ -147,8 +168,13 @@ class BagWriter:
                 text = definition if definition is not None else msgdefs.full_text(type_name)
                 schema_id = self._writer.register_schema(type_name, 'ros2msg', text.encode('utf-8'))
                 self._schemas[type_name] = schema_id
-            type_hash = msgdefs.type_hash(type_name)
-            metadata = {'offered_qos_profiles': offered_qos_profiles, 'topic_type_hash': type_hash}
+            if channel_metadata is not None:
+                metadata = {str(k): str(v) for k, v in channel_metadata.items()}
+                offered_qos_profiles = metadata.get('offered_qos_profiles', '')
+                type_hash = metadata.get('topic_type_hash', '')
+            else:
+                type_hash = msgdefs.type_hash(type_name)
+                metadata = {'offered_qos_profiles': offered_qos_profiles, 'topic_type_hash': type_hash}
             self._channels[name] = self._writer.register_channel(name, 'cdr', schema_id, metadata)
             self._topic_info[name] = {'type': type_name, 'qos': offered_qos_profiles, 'hash': type_hash}
             self._counts[name] = 0
@@ -169,7 +195,10 @@ class BagWriter:
                                      sequence=self._counts[name])
             self._first_ns = log_time_ns if self._first_ns is None else min(self._first_ns, log_time_ns)
             self._last_ns = log_time_ns if self._last_ns is None else max(self._last_ns, log_time_ns)
-            if time.monotonic() - self._last_flush >= self.flush_period_s:
+            now = time.monotonic()
+            if self._pending_since is None:
+                self._pending_since = now
+            if self._flush_due(now):
                 self._flush_locked()
 
     @contextlib.contextmanager
@@ -201,6 +230,13 @@ class BagWriter:
             self.add_topic(name, type_name_of(msg))
         self.write(name, serialize_message(msg), log_time_ns)
 
+    def add_attachment(self, name: str, data: bytes, media_type: str = 'application/octet-stream',
+                       log_time_ns: int = 0, create_time_ns: int = 0) -> None:
+        """Write an MCAP attachment record (repair copies a damaged file's attachments)."""
+        with self._mutating():
+            self._writer.add_attachment(create_time=int(create_time_ns), log_time=int(log_time_ns), name=str(name),
+                                        media_type=str(media_type), data=bytes(data))
+
     def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
         """Write an MCAP metadata record (string keys and values), e.g. the scene a run used."""
         self._check_open()
@@ -214,14 +250,17 @@ class BagWriter:
                 self._flush_locked()
 
     def flush_if_due(self) -> None:
-        """flush() if flush_period_s has passed since the last flush (call from a timer when idle)."""
-        if not self._closed and time.monotonic() - self._last_flush >= self.flush_period_s:
+        """flush() if the oldest unflushed message is about flush_period_s old (the writer's own
+        background thread calls this too; a timer calling it is harmless)."""
+        if not self._closed and self._flush_due(time.monotonic()):
             with self._mutating():
-                self._flush_locked()
+                if self._flush_due(time.monotonic()):
+                    self._flush_locked()
 
     def _flush_locked(self) -> None:
         self._writer.flush()
         self._last_flush = time.monotonic()
+        self._pending_since = None
 
     def close(self) -> None:
         """Write the summary and the rosbag2 metadata record and close the file. Idempotent."""
@@ -237,6 +276,7 @@ class BagWriter:
                 os.fsync(self._file.fileno())
             finally:
                 self._closed = True
+                self._stop_flusher.set()
                 self._file.close()
                 atexit.unregister(self._atexit)
                 self._busy_thread = None
@@ -255,7 +295,10 @@ class BagWriter:
         total = sum(self._counts.values())
         topics = []
         for name, info in self._topic_info.items():
-            qos = yaml.safe_load(info['qos']) if info['qos'] else []
+            try:
+                qos = yaml.safe_load(info['qos']) if info['qos'] else []
+            except yaml.YAMLError:   # text copied from a damaged file by repair: keep it as text
+                qos = info['qos']
             topics.append({'topic_metadata': {'name': name, 'type': info['type'], 'serialization_format': 'cdr',
                                               'offered_qos_profiles': qos, 'type_description_hash': info['hash']},
                            'message_count': self._counts[name]})
@@ -276,6 +319,21 @@ class BagWriter:
             'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
         }}
         return yaml.safe_dump(data, sort_keys=False)
+
+
+def _flush_loop(ref: Callable[[], BagWriter | None], stop: threading.Event, tick_s: float) -> None:
+    """Background flusher: wakes every tick_s and flushes a writer whose oldest unflushed message
+    is due; ends when the writer is closed or garbage-collected."""
+    while not stop.wait(tick_s):
+        writer = ref()
+        if writer is None or writer._closed:
+            return
+        try:
+            writer.flush_if_due()
+        except (BagError, ValueError, OSError):   # closed meanwhile, or the disk is gone: close() reports it
+            return
+        finally:
+            del writer
 
 
 def _weak_close(writer: BagWriter) -> Callable[[], None]:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, fields
 
 
@@ -37,22 +38,36 @@ class Command:
     }
 
     def validate(self) -> 'Command':
+        """This command with every value a float in its range (self when it already is one), or
+        CommandError naming the first bad value and the allowed range (NaN, inf, text, booleans,
+        None and out-of-range values are refused)."""
+        values = {}
         for f in fields(self):
-            value = getattr(self, f.name)
             low, high = self.LIMITS[f.name]
-            check_command_value(f.name, value, low, high)
-        return self
+            values[f.name] = check_command_value(f.name, getattr(self, f.name), low, high)
+        if all(type(getattr(self, k)) is float for k in values):
+            return self
+        return Command(**values)
 
 
 def check_command_value(name: str, value: float, low: float, high: float) -> float:
     """Return value as float, or raise CommandError naming the value and the allowed range."""
+    if isinstance(value, (bool, str, bytes)) or not isinstance(value, numbers.Real):
+        raise CommandError(f'{name}={value!r} is not a number; allowed: a finite value in [{low}, {high}]')
     try:
         v = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise CommandError(f'{name}={value!r} is not a number; allowed: a finite value in [{low}, {high}]') from None
     if not math.isfinite(v) or v < low or v > high:
         raise CommandError(f'{name}={value!r} rejected; allowed: a finite value in [{low}, {high}]')
+    if name == 'valve_opening' and 0.0 < v < VALVE_MIN_OPENING:
+        # a pin-hole opening makes the orifice loss overflow (1/opening^2): shut or a real opening
+        raise CommandError(f'{name}={value!r} rejected; allowed: 0 (shut) or a finite value in '
+                           f'[{VALVE_MIN_OPENING:g}, {high}]')
     return v
+
+
+VALVE_MIN_OPENING = 1e-9    # smallest valve opening other than 0 (shut) a command may ask for
 
 
 @dataclass(frozen=True)

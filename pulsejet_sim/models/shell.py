@@ -118,7 +118,8 @@ import numpy as np
 
 from pulsejet_sim.models import shell_kernels as sk
 from pulsejet_sim.models.base import Command, ModelError, Observation, SimulationBlowUp
-from pulsejet_sim.models.shell_geometry import Profile, build_profile
+from pulsejet_sim.models.shell_geometry import GEOMETRY_KINDS, Profile, build_profile
+from pulsejet_sim.schema import show
 
 _KERNELS: dict = {}
 INTEGRATORS = {'verlet': (0, 1.0), 'implicit_midpoint': (1, 0.5), 'backward_euler': (1, 1.0)}
@@ -146,7 +147,7 @@ def _section(scene, key, required=True):
             raise ModelError(f'{key}: missing section; allowed: a mapping (see config/shell_robot.yaml)')
         return {}
     if not isinstance(sec, Mapping):
-        raise ModelError(f'{key}: {sec!r} is not a mapping; allowed: a mapping of parameters')
+        raise ModelError(f'{key}: {show(sec)} is not a mapping; allowed: a mapping of parameters')
     return sec
 
 
@@ -157,13 +158,13 @@ def _num(sec, key, where, low, high, default=None, low_open=False):
         return float(default)
     value = sec[key]
     if isinstance(value, bool):
-        raise ModelError(f'{where}.{key}: {value!r} is not a number; allowed: a number in [{low}, {high}]')
+        raise ModelError(f'{where}.{key}: {show(value)} is not a number; allowed: a number in [{low}, {high}]')
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ModelError(f'{where}.{key}: {value!r} is not a number; allowed: a number in [{low}, {high}]') from None
+        raise ModelError(f'{where}.{key}: {show(value)} is not a number; allowed: a number in [{low}, {high}]') from None
     if not math.isfinite(v) or v < low or v > high or (low_open and v == low):
-        raise ModelError(f'{where}.{key}: {value!r} is out of range; allowed: a number in '
+        raise ModelError(f'{where}.{key}: {show(value)} is out of range; allowed: a number in '
                          f'{"(" if low_open else "["}{low}, {high}]')
     return v
 
@@ -171,14 +172,14 @@ def _num(sec, key, where, low, high, default=None, low_open=False):
 def _choice(sec, key, where, allowed, default):
     value = sec.get(key, default)
     if value not in allowed:
-        raise ModelError(f'{where}.{key}: {value!r} is not known; allowed: one of {", ".join(map(str, allowed))}')
+        raise ModelError(f'{where}.{key}: {show(value)} is not known; allowed: one of {", ".join(map(str, allowed))}')
     return value
 
 
 def _unknown(sec, where, allowed):
     for k in sec:
         if k not in allowed:
-            raise ModelError(f'{where}.{k}: unknown key (value {sec[k]!r}); allowed: {", ".join(allowed)}')
+            raise ModelError(f'{where}.{show(k) if not isinstance(k, str) else k[:60]}: unknown key (value {show(sec[k])}); allowed: {", ".join(allowed)}')
 
 
 def muscle_shape(desired: str, Xm: np.ndarray, r0m: np.ndarray, taper: float, amp: float) -> np.ndarray:
@@ -272,6 +273,7 @@ class ShellModel:
             raise ModelError(f'mesh.elements: {ne!r} rejected; allowed: an integer in [4, 400]')
 
         geo = _section(scene, 'geometry')
+        _choice(geo, 'kind', 'geometry', GEOMETRY_KINDS, None)   # before build_profile: a list is unhashable there
         profile = build_profile(geo, ne)
 
         mat = _section(scene, 'material')
