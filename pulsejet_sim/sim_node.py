@@ -98,6 +98,7 @@ class SimNode(Node):
         super().__init__('sim_node', **kwargs)
         import yaml
         from pulsejet_sim.scene import load_scene
+        from pulsejet_sim.schema import YAMLInputError, safe_load_yaml
         from pulsejet_sim.simulation import Simulation
         self._ready = False
         # the pacing thread and the executor thread (commands, services, parameters, diagnostics)
@@ -113,8 +114,8 @@ class SimNode(Node):
         overrides = None
         if p['scene_overrides'].strip():
             try:
-                overrides = yaml.safe_load(p['scene_overrides'])
-            except yaml.YAMLError as exc:
+                overrides = safe_load_yaml(p['scene_overrides'], 'parameter scene_overrides')
+            except (yaml.YAMLError, YAMLInputError) as exc:
                 raise ValueError(f'parameter scene_overrides={p["scene_overrides"]!r} rejected: not YAML ({exc})') \
                     from None
             if not isinstance(overrides, dict):

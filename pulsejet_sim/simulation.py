@@ -32,8 +32,10 @@ class Simulation:
         if self.fault is not None:
             raise SimulationBlowUp(f'simulation is stopped after a fault: {self.fault}; reset to continue',
                                    self.time_s)
-        if command is not None:
-            self.command = command
+        if command is not None and command is not self.command:
+            # checked once per new command (CommandError names the bad value): a NaN or an
+            # out-of-range value never reaches the physics, whoever calls
+            self.command = command.validate()
         if n_steps > 0:
             try:
                 done = self.model.advance(self.state, self.time_s, n_steps, self.command)

@@ -126,7 +126,11 @@ def load_sweep(path: str | os.PathLike) -> tuple[dict, list[RunSpec]]:
         if not builtin.is_file():
             raise SweepError(f'sweep {str(path)!r} not found; allowed: a YAML path or a name under config/sweeps/')
         p = builtin
-    data = yaml.safe_load(p.read_text())
+    from pulsejet_sim.schema import YAMLInputError, read_yaml_file
+    try:
+        data = read_yaml_file(p, f'sweep {str(p)!r}')
+    except YAMLInputError as err:
+        raise SweepError(str(err)) from None
     if not isinstance(data, dict) or 'studies' not in data:
         raise SweepError(f'{p}: top level must be a mapping with key studies (and name, duration_s, metric)')
     unknown = set(data) - {'name', 'description', 'duration_s', 'metric', 'studies'}
@@ -145,6 +149,20 @@ def load_sweep(path: str | os.PathLike) -> tuple[dict, list[RunSpec]]:
         if not isinstance(body, dict) or 'base' not in body or not isinstance(body.get('axes', {}), dict):
             raise SweepError(f'{p}: studies.{study}: allowed: a mapping with base (a scene) and axes')
         axes = body.get('axes') or {}
+        for axis, options in axes.items():
+            if not isinstance(options, dict) or not options:
+                raise SweepError(f'{p}: studies.{study}.axes.{axis}: {options!r} rejected; allowed: a mapping of '
+                                 f'label -> overrides (a mapping)')
+            for label, values in options.items():
+                if values is not None and not isinstance(values, dict):
+                    raise SweepError(f'{p}: studies.{study}.axes.{axis}.{label}: {values!r} rejected; allowed: '
+                                     f'a mapping of scene overrides (and scene: NAME)')
+        for key in ('overrides',):
+            if body.get(key) is not None and not isinstance(body[key], dict):
+                raise SweepError(f'{p}: studies.{study}.{key}: {body[key]!r} rejected; allowed: a mapping')
+        replace = body.get('replace') or ()
+        if not isinstance(replace, (list, tuple)) or not all(isinstance(r, str) for r in replace):
+            raise SweepError(f'{p}: studies.{study}.replace: {replace!r} rejected; allowed: a list of section names')
         choices = [[(axis, label, values or {}) for label, values in options.items()] for axis, options in axes.items()]
         for combo in itertools.product(*choices) if choices else [()]:
             scene = body['base']

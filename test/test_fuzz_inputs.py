@@ -389,8 +389,6 @@ def check_sweep_text(text: str, tmp_dir: Path) -> str:
     except (SweepError, yaml.YAMLError) as err:
         assert str(err)
         return 'refused'
-    except (AttributeError, TypeError, ValueError) as err:   # KNOWN_SWEEP_BUG: reported, not ours to fix
-        return f'known sweep.py bug ({type(err).__name__})'
     for spec in runs[:4]:
         try:
             load_scene(spec.scene, dict(spec.overrides), replace=spec.replace)
@@ -399,21 +397,14 @@ def check_sweep_text(text: str, tmp_dir: Path) -> str:
     return 'loaded'
 
 
-KNOWN_SWEEP_BUG = ('sweep.py (owned by the parallel Dask work, not edited here): load_sweep raises '
-                   'AttributeError/TypeError/ValueError instead of SweepError for an axis or option that is '
-                   'not a mapping, and reads with plain yaml.safe_load (no size/alias limits); see '
-                   'docs/RELIABILITY.md')
-
-
 @pytest.mark.timeout(120)
 @FUZZ_SETTINGS
 @given(text=sweep_texts())
 def test_sweep_files_load_or_are_refused(text: str, tmp_path_factory) -> None:
-    """Any exception other than SweepError / YAML error (and the known sweep.py bug) fails."""
+    """Any exception other than SweepError / YAML error fails."""
     check_sweep_text(text, tmp_path_factory.mktemp('sweep'))
 
 
-@pytest.mark.xfail(raises=(AttributeError, TypeError, ValueError), reason=KNOWN_SWEEP_BUG, strict=False)
 @pytest.mark.parametrize('axis', [1, {'a': 1}, {'a': 'text'}])
 def test_sweep_axis_that_is_not_a_mapping_is_refused(tmp_path: Path, axis: Any) -> None:
     from pulsejet_sim.sweep import SweepError, load_sweep

@@ -84,11 +84,11 @@ def test_long_bad_values_are_shortened_in_messages(tmp_path: Path) -> None:
 
 def test_sweep_and_fit_files_use_the_safe_loader(tmp_path: Path) -> None:
     from pulsejet_sim.fit import FitError, load_fit
-    from pulsejet_sim.sweep import load_sweep
+    from pulsejet_sim.sweep import SweepError, load_sweep
     marker = tmp_path / 'executed'
     evil = tmp_path / 'evil.yaml'
     evil.write_text(f'studies: !!python/object/apply:os.system ["touch {marker}"]\n')
-    with pytest.raises(yaml.YAMLError):
+    with pytest.raises(SweepError, match='not valid YAML.*python/object/apply'):
         load_sweep(evil)
     with pytest.raises((FitError, yaml.YAMLError, ValueError)):
         load_fit(evil)
