@@ -97,6 +97,13 @@ def summarize(path: str | Path) -> dict[str, Any]:
             break
     out['start_time_s'] = float(span[0]) if span else math.nan
     out['duration_s'] = float(span[1] - span[0]) if span else math.nan
+    # a live recording logs wall time: simulated over wall seconds is the real-time factor achieved;
+    # an offline run logs simulation time itself (the factor is then not a property of the file)
+    out['real_time_factor'] = math.nan
+    if span and info.first_log_ns is not None and info.last_log_ns > info.first_log_ns:
+        wall = (info.last_log_ns - info.first_log_ns) * 1e-9
+        if abs(info.first_log_ns * 1e-9 - span[0]) > 1.0:        # log times are not simulation times
+            out['real_time_factor'] = out['duration_s'] / wall
 
     velocity = get(VELOCITY)
     if velocity is not None and len(velocity[0]):
@@ -141,6 +148,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     rows = [
         ('file', summary.get('file', ''), ''),
         ('duration', _fmt(summary.get('duration_s')), 's'),
+        ('real-time factor', _fmt(summary.get('real_time_factor')), '(simulated / wall seconds, live recordings)'),
         ('peak speed', _fmt(summary.get('peak_speed_m_s')), 'm/s'),
         ('mean speed', _fmt(summary.get('mean_speed_m_s')), 'm/s'),
         ('distance travelled', _fmt(summary.get('distance_m')), 'm'),

@@ -54,6 +54,7 @@ def test_summary_numbers(run_file: Path) -> None:
                                     'closure_error': 0.0, 'closure_relative': 0.08}
     assert s['energy_ledger_level'] == 'WARN'
     assert not s['truncated']
+    assert s['real_time_factor'] != s['real_time_factor']     # NaN: offline, log time is simulation time
 
 
 def test_format_summary_has_units(run_file: Path) -> None:
@@ -94,3 +95,17 @@ def test_bad_input_one_line_error_exit_2(kind: str, entry: str, tmp_path: Path,
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and 'Traceback' not in err
     assert str(path) in err and 'expected' in err
+
+
+def test_real_time_factor_of_a_live_recording(tmp_path: Path) -> None:
+    """A live recording logs wall time: 2 s simulated over 4 s of (epoch) wall time is a factor 0.5;
+    an offline one (log time = simulation time) has none."""
+    path = tmp_path / 'live.mcap'
+    wall0_ns = 1_800_000_000 * 10**9
+    with BagWriter(path) as bag:
+        for i in range(round(DURATION_S / DT_S) + 1):
+            t = i * DT_S
+            for topic, msg in messages.observation_messages(observation(t)):
+                bag.write_message(topic, msg, wall0_ns + round(2 * t * 1e9))
+    assert analysis.summarize(path)['real_time_factor'] == pytest.approx(0.5)
+    assert 'real-time factor    0.5' in analysis.format_summary(analysis.summarize(path))
