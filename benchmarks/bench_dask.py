@@ -19,6 +19,9 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_common import cpu_model  # noqa: E402
 
 from pulsejet_sim.sweep import RunSpec, load_sweep, open_executor, run_sweep  # noqa: E402
 
@@ -33,16 +36,6 @@ def workloads() -> dict[str, list[RunSpec]]:
     shell = [RunSpec(r.study, r.labels, r.scene, r.overrides, 1.0, r.replace) for r in runs
              if r.study == 'external' and dict(r.labels)['coupling'] == 'consistent'][::4][:8]
     return {'lumped': lumped, 'shell': shell}
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.startswith('model name'):
-                return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or 'unknown'
 
 
 def key(rows):

@@ -53,10 +53,12 @@ import numpy as np  # noqa: E402
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from pulsejet_sim.models.base import SimulationBlowUp  # noqa: E402
 from pulsejet_sim.scene import SceneError, load_scene  # noqa: E402
 from pulsejet_sim.simulation import Simulation  # noqa: E402
+from bench_common import cpu_model as _cpu_model  # noqa: E402
 
 SCENE = 'shell_robot'
 RESULTS_MD = HERE / 'results' / 'shell_speed_accuracy.md'
@@ -643,16 +645,6 @@ def main(argv=None) -> int:
              f'dt {ref.dt_s:g} s, {ref.integrator}; {now:%Y-%m-%d})')
         log(f'written {png}')
     return 0
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.startswith('model name'):
-                return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor()
 
 
 if __name__ == '__main__':
