@@ -73,10 +73,11 @@ def test_lumped_rewards_and_seeding(reward):
 
 
 def test_lumped_fault_terminates_with_penalty_not_nan():
-    env = E.LumpedPumpValveEnv(initial_b_jitter=0.0)
+    # paper 001's equations as written: an inflated shell released through an open valve collapses
+    env = E.LumpedPumpValveEnv('escape', {'options': {'coupling': 'paper'}}, initial_b_jitter=0.0)
     env.reset(seed=0)
-    for _ in range(40):   # 50 l/s into a sealed cavity: the shell outgrows its ellipsoid
-        obs, reward, terminated, truncated, info = env.step(np.array([0.05, 0.0]))
+    for _ in range(100):
+        obs, reward, terminated, truncated, info = env.step(np.array([0.0, 1.0]))
         if terminated:
             break
     assert terminated and not truncated

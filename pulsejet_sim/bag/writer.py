@@ -103,6 +103,7 @@ class BagWriter:
         self._closed = False
         self._busy_thread: int | None = None          # thread id inside write(), for signal deferral
         self._pending_signal: int | None = None
+        self._previous_handlers: dict = {}               # signal -> handler before install_signal_handlers
         # Close at interpreter exit too (sys.exit, an uncaught exception), without keeping self alive.
         self._atexit = _weak_close(self)
         atexit.register(self._atexit)
@@ -220,7 +221,7 @@ class BagWriter:
         finally:
             if pending is not None:
                 self.close()
-                _redeliver(pending)
+                _redeliver(pending, self._previous_handlers.get(pending))
 
     def write_message(self, topic: str, msg: Any, log_time_ns: int) -> None:
         """Serialize an rclpy message and write it, adding the topic with the message's type if new."""
@@ -282,7 +283,7 @@ class BagWriter:
                 self._busy_thread = None
                 pending, self._pending_signal = self._pending_signal, None
         if pending is not None:
-            _redeliver(pending)
+            _redeliver(pending, self._previous_handlers.get(pending))
 
     def _check_open(self) -> None:
         if self._closed:
@@ -346,10 +347,15 @@ def _weak_close(writer: BagWriter) -> Callable[[], None]:
     return close
 
 
-def _redeliver(signum: int) -> None:
-    """Raise signum again with the handler that was in place before ours (KeyboardInterrupt for SIGINT,
-    termination for SIGTERM), so the process exits the way it would have without the bag."""
-    signal.raise_signal(signum)
+def _redeliver(signum: int, handler: Any = None) -> None:
+    """Act on signum as the handler in place before ours would have (KeyboardInterrupt for SIGINT,
+    termination for SIGTERM), so the process exits the way it would have without the bag. A Python
+    handler is called here, synchronously: re-raising the signal from inside a handler would only
+    queue it, and the interrupted code would run on against the closed bag first."""
+    if callable(handler):
+        handler(signum, None)
+    else:
+        signal.raise_signal(signum)
 
 
 def qos_profiles_yaml(profiles: Iterable[Any]) -> str:
@@ -383,6 +389,7 @@ def install_signal_handlers(writer: BagWriter,
     there, close the writer in a `finally` after spin returns.
     """
     previous = {s: signal.getsignal(s) for s in signals}
+    writer._previous_handlers = dict(previous)
 
     def restore() -> None:
         for s, handler in previous.items():
@@ -394,7 +401,7 @@ def install_signal_handlers(writer: BagWriter,
             writer._pending_signal = signum
             return
         writer.close()
-        _redeliver(signum)
+        _redeliver(signum, previous.get(signum))
 
     for s in signals:
         signal.signal(s, handler)

@@ -64,6 +64,10 @@ FLUID_SPEC = {
 }
 ACTUATOR_SPEC = {
     'pump_time_constant_s': Number(0.05, 1e-4, 10.0, unit='s'),
+    # the pump's relief and stall pressures, Pa; default (-1): the shell's elastic pressure at
+    # b = 0.8 a and 0.9 a, so no command inflates the shell past its bound
+    'pump_relief_pressure_pa': Number(-1.0, -1.0, 1e7, unit='Pa'),
+    'pump_stall_pressure_pa': Number(-1.0, -1.0, 1e7, unit='Pa'),
     'valve_stroke_time_s': Number(0.05, 1e-4, 10.0, unit='s'),
     'initial_pump_flow_m3_s': Number(0.0, 0.0, Command.LIMITS['pump_flow_m3_s'][1], unit='m^3/s'),
     'initial_valve_opening': Number(1.0, 0.0, 1.0, unit=''),
@@ -202,6 +206,21 @@ class LumpedModel:
         p[K.P_B_MIN] = 0.02 * b0
         p[K.P_B_MAX] = 0.999 * a
         p[K.P_U_MAX] = 100.0
+        k = m['stiffness_n_m']
+
+        def elastic_pressure(b_m):   # k (b - b0) / (dV/db), Pa
+            return k * (b_m - b0) / (8.0 / 3.0 * math.pi * a * b_m)
+        relief = act['pump_relief_pressure_pa']
+        stall = act['pump_stall_pressure_pa']
+        relief = elastic_pressure(0.8 * a) if relief < 0 else relief
+        stall = elastic_pressure(0.9 * a) if stall < 0 else stall
+        limit = elastic_pressure(0.95 * a)
+        if not relief < stall <= limit:
+            raise ModelError(f'actuator.pump_stall_pressure_pa: {stall!r} Pa with relief {relief!r} Pa; allowed: '
+                             f'relief < stall <= {limit:.6g} Pa (the elastic pressure of the shell at b = 0.95 a: a '
+                             f'stronger pump inflates it past its bound), or -1 for the defaults')
+        p[K.P_P_RELIEF] = relief
+        p[K.P_P_STALL] = stall
         if g['solid_volume_m3'] >= 4.0 / 3.0 * math.pi * a * b0 * b0:
             raise ModelError(f'geometry.solid_volume_m3: {g["solid_volume_m3"]!r} m^3 fills the rest cavity; '
                              f'allowed: below {4.0 / 3.0 * math.pi * a * b0 * b0:.4g} m^3')

@@ -96,7 +96,9 @@ P_VALVE_RATE = 16  # valve stroke rate, 1/s
 P_B_MIN = 17       # bounds of b that the model accepts, m
 P_B_MAX = 18
 P_U_MAX = 19       # bound of |U|, m/s
-NP = 20
+P_P_RELIEF = 20    # pump relief valve: full flow up to this shell pressure, Pa
+P_P_STALL = 21     # ... and none at this one (the pump's pressure-flow curve), Pa
+NP = 22
 
 # ---- diagnostic outputs of the right-hand side --------------------------------------------------
 D_THRUST = 0
@@ -177,9 +179,17 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     b = y[Y_B]
     w = y[Y_W]
     q_p = y[Y_QP]
-    dq_p = (q_cmd - q_p) / p[P_PUMP_TAU]
     c_a = 8.0 / 3.0 * math.pi * a
     v_b = c_a * b                     # dV/db, m^2
+    # the pump's pressure-flow curve (a positive-displacement pump with a relief valve): full flow
+    # up to the relief pressure of the shell's elastic pressure k (b - b0) / V_b, none at the stall
+    # pressure, linear between; it keeps any command sequence from inflating the shell past its bound
+    q_target = q_cmd
+    if q_cmd > 0.0:
+        p_el = p[P_K] * (b - p[P_B0]) / v_b
+        if p_el > p[P_P_RELIEF]:
+            q_target = q_cmd * max(0.0, (p[P_P_STALL] - p_el) / (p[P_P_STALL] - p[P_P_RELIEF]))
+    dq_p = (q_target - q_p) / p[P_PUMP_TAU]
     volume = c_a * b * b / 2.0        # 4/3 pi a b^2
     a_n = p[P_A_N]
 
