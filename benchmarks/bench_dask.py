@@ -65,7 +65,7 @@ def main() -> int:
                 table.append((load, len(specs), name, n, first, steady, len(specs) / steady))
                 print(f'{load:7s} {name:18s} {n} workers: {len(specs) / steady:7.2f} runs/s', flush=True)
     now = datetime.datetime.now(datetime.timezone.utc)
-    lines = [f'# Sweep throughput: process pool vs Dask LocalCluster\n',
+    lines = ['# Sweep throughput: process pool vs Dask LocalCluster\n',
              f'{now:%Y-%m-%d %H:%M UTC}, `uname -m` {platform.machine()}, {cpu_model()}, {os.cpu_count()} cores '
              f'(shared with other jobs), Python {platform.python_version()}; command: '
              f'`.venv/bin/python benchmarks/bench_dask.py`\n',

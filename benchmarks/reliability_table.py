@@ -18,11 +18,9 @@ import datetime
 import os
 import platform
 import signal
-import subprocess
 import sys
 import tempfile
 import time
-import traceback
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]

@@ -301,7 +301,6 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
             if scale not in ('linear', 'log') or (scale == 'log' and low <= 0):
                 raise OptimizeError(f'{where}.scale: {scale!r} rejected; allowed: linear, or log with low > 0')
             parameters.append(Parameter(key, low, high, initial=low, log=scale == 'log'))
-    names = {(q.key if isinstance(q, Parameter) else q.name) for q in parameters}
     numeric = {q.key for q in parameters if isinstance(q, Parameter)}
     derived = {str(k): str(v) for k, v in (data.get('derived') or {}).items()}
     for key, expr in derived.items():

@@ -183,8 +183,9 @@ def read_recorded_states(path: str | Path) -> RecordedStates:
         stamped = raw[VELOCITY]
         log_is_sim = all(abs(ns * 1e-9 - t) < 1e-9 for ns, t, _ in stamped if t is not None)
     stamps = np.array(sorted({t for t_list in raw.values() for _, t, _ in t_list if t is not None}))
-    to_sim = None
-    if not log_is_sim:
+    if log_is_sim:
+        to_sim = None
+    else:
         if not clock:
             raise ResimError(f'{str(path)!r}: log times are not simulation time and there is no /clock to map '
                              'them; expected a recording with /clock or stamped state topics')

@@ -6,7 +6,7 @@ import math
 import pytest
 
 from pulsejet_sim.engine import session as eng
-from pulsejet_sim.models.base import Command, CommandError
+from pulsejet_sim.models.base import CommandError
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.simulation import Simulation
 

@@ -9,8 +9,6 @@ the new time was seen on the wire.
 """
 from __future__ import annotations
 
-import math
-import time
 from pathlib import Path
 
 import pytest

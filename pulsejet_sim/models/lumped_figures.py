@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import Command, SimulationBlowUp
+from pulsejet_sim.models.base import SimulationBlowUp
 
 
 @dataclass
@@ -66,7 +66,6 @@ def section41_figures(model, duration_s: float = 20.0, settle_window_s: float = 
     command = model.initial_command
     state = model.initial_state()
     initial = state.copy()
-    diag = np.empty(K.ND)
     k = model.params[K.P_K]
     m0 = _fluid_mass(model, state[K.Y_B])
     m_rest = _fluid_mass(model, model.params[K.P_B0])
