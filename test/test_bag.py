@@ -208,11 +208,13 @@ def test_reader_rejects_non_mcap(tmp_path: Path) -> None:
 # --- crash safety: a child process writing when it gets a signal -----------------------------------
 
 CHILD = textwrap.dedent('''
-    import sys, time
+    import signal, sys, time
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Float64
     from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
     bag = BagWriter(sys.argv[1], chunk_size_bytes=4096, flush_period_s=0.2)
+    # a background job of a non-interactive shell (CI) inherits SIGINT ignored: ask for Python's own
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     install_signal_handlers(bag)
     bag.add_topic('pulsejet/volume', 'std_msgs/msg/Float64')
     i = 0

@@ -388,6 +388,9 @@ def install_signal_handlers(writer: BagWriter,
     restoring the previous handlers. Not for processes where rclpy owns the signals (ROS nodes):
     there, close the writer in a `finally` after spin returns.
     """
+    # a signal the process ignores (e.g. SIGINT in a background job) stays ignored: closing the bag
+    # on it would leave the process writing to a closed bag
+    signals = tuple(s for s in signals if signal.getsignal(s) is not signal.SIG_IGN)
     previous = {s: signal.getsignal(s) for s in signals}
     writer._previous_handlers = dict(previous)
 
