@@ -193,16 +193,8 @@ def dotted_overrides(values: dict[str, float]) -> dict:
 def load_fit(path: str | Path) -> FitSpec:
     """Read and validate a fit file (a path, or a name under config/fits/)."""
     from pulsejet_sim.scene import SceneError, load_scene_data, merge, resolve_scene_path
-    p = Path(path)
-    if not p.is_file():
-        builtin = Path(__file__).resolve().parent.parent / 'config' / 'fits' / f'{path}.yaml'
-        if not builtin.is_file():
-            raise FitError(f'fit file {str(path)!r} not found; allowed: a YAML path or a name under config/fits/')
-        p = builtin
-    try:
-        data = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as err:
-        raise FitError(f'{p}: not valid YAML ({err})') from None
+    from pulsejet_sim.schema import read_config_file
+    p, data = read_config_file(path, 'fits', 'fit file', FitError)
     if not isinstance(data, dict):
         raise FitError(f'{p}: {type(data).__name__} at top level; allowed: a mapping with keys {", ".join(TOP_KEYS)}')
     where = f'{p}: '

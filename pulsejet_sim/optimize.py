@@ -206,14 +206,8 @@ def _number(value: Any, where: str, allowed: str, positive: bool = False) -> flo
 def load_optimize(path: str | Path) -> OptimizeSpec:
     """Read and validate an optimisation file (a path, or a name under config/optimize/)."""
     from pulsejet_sim.scene import SceneError, load_scene
-    p = Path(path)
-    if not p.is_file():
-        builtin = Path(__file__).resolve().parent.parent / 'config' / 'optimize' / f'{path}.yaml'
-        if not builtin.is_file():
-            raise OptimizeError(f'optimisation file {str(path)!r} not found; allowed: a YAML path or a name under '
-                                'config/optimize/')
-        p = builtin
-    data = yaml.safe_load(p.read_text())
+    from pulsejet_sim.schema import read_config_file
+    p, data = read_config_file(path, 'optimize', 'optimisation file', OptimizeError)
     if not isinstance(data, dict):
         raise OptimizeError(f'{p}: top level must be a mapping; allowed keys: {", ".join(TOP_KEYS)}')
     for key in data:

@@ -211,3 +211,20 @@ def check_section(section: str, given: Any, spec: Mapping[str, Any]) -> dict[str
         else:
             out[key] = rule.default
     return out
+
+
+def read_config_file(path: Any, folder: str, what: str, error: type) -> tuple[Any, Any]:
+    """(file path, parsed data) of a YAML file given as a path or as a name under config/<folder>/,
+    read with the bounded safe loader; raises `error` naming the file when it is missing or not
+    valid YAML (sweeps, fits and optimisations share this)."""
+    from pathlib import Path
+    p = Path(path)
+    if not p.is_file():
+        builtin = Path(__file__).resolve().parent.parent / 'config' / folder / f'{path}.yaml'
+        if not builtin.is_file():
+            raise error(f'{what} {str(path)!r} not found; allowed: a YAML path or a name under config/{folder}/')
+        p = builtin
+    try:
+        return p, read_yaml_file(p, f'{what} {str(p)!r}')
+    except YAMLInputError as err:
+        raise error(str(err)) from None

@@ -120,17 +120,8 @@ def run_one(spec: RunSpec) -> RunRow:
 
 def load_sweep(path: str | os.PathLike) -> tuple[dict, list[RunSpec]]:
     """Read a sweep file and expand it into runs."""
-    p = Path(path)
-    if not p.is_file():
-        builtin = Path(__file__).resolve().parent.parent / 'config' / 'sweeps' / f'{path}.yaml'
-        if not builtin.is_file():
-            raise SweepError(f'sweep {str(path)!r} not found; allowed: a YAML path or a name under config/sweeps/')
-        p = builtin
-    from pulsejet_sim.schema import YAMLInputError, read_yaml_file
-    try:
-        data = read_yaml_file(p, f'sweep {str(p)!r}')
-    except YAMLInputError as err:
-        raise SweepError(str(err)) from None
+    from pulsejet_sim.schema import read_config_file
+    p, data = read_config_file(path, 'sweeps', 'sweep', SweepError)
     if not isinstance(data, dict) or 'studies' not in data:
         raise SweepError(f'{p}: top level must be a mapping with key studies (and name, duration_s, metric)')
     unknown = set(data) - {'name', 'description', 'duration_s', 'metric', 'studies'}
