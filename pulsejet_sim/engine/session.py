@@ -36,6 +36,7 @@ SAFE_COMMAND = Command(pump_flow_m3_s=0.0, valve_opening=1.0, cable_force_n=0.0)
 LEDGER_RATE_HZ = 5.0
 HOLD_REPUBLISH_S = 0.5
 MAX_CATCH_UP_PERIODS = 5
+DROP_LOG_PERIOD_S = 10.0     # at most one "fell behind" log line per this many wall seconds
 AFAP_BUDGET = 0.8
 RTF_WARN_FRACTION = 0.9
 STABLE_MARGIN_WARN = 1.0
@@ -144,8 +145,8 @@ class SessionConfig:
 
 @dataclass
 class Session:
-    """See the module docstring. ``clock`` returns wall seconds (time.monotonic in the node) and
-    ``physics_clock`` the wall time used to cost the physics (time.perf_counter)."""
+    """See the module docstring. Every call takes ``now``, the wall time in seconds (time.monotonic in
+    the node, a fake clock in tests); ``physics_clock`` times the physics (time.perf_counter)."""
     sim: object
     config: SessionConfig
     now: float
@@ -165,6 +166,7 @@ class Session:
     _last_command_steps: int = 0
     _last_command_wall: Optional[float] = None
     _last_hold_publish: float = -math.inf
+    _last_drop_log: float = -math.inf
     _started_wall: float = 0.0
     events: list = field(default_factory=list)
 
@@ -243,10 +245,11 @@ class Session:
             return self._take()
         dropped = self._pacer.dropped_s
         due = self._pacer.steps_due(now)
-        if self._pacer.dropped_s > dropped:
+        if self._pacer.dropped_s > dropped and now - self._last_drop_log >= DROP_LOG_PERIOD_S:
+            self._last_drop_log = now
             self._emit(Log('warning', f'fell behind real time (factor {self.config.real_time_factor:g}): '
                                       f'{self.dropped_s():.3f} s of wall time dropped so far, not caught up; '
-                                      f'the physics costs {self.physics_cost_rtf():.3g}x real time'))
+                                      f'the physics alone runs at {self.physics_cost_rtf():.3g}x real time'))
         if due > 0:
             self._run_periods(due)
         self._check_duration()
