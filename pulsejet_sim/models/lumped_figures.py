@@ -89,18 +89,21 @@ def section41_figures(model, duration_s: float = 20.0, settle_window_s: float = 
     window_end_step = None
     blow_up_s, cause = None, ''
     deflation_90 = None
+    def record(t_s):
+        d = sample()
+        times.append(t_s)
+        thrust.append(d[K.D_THRUST])
+        amv.append(d[K.D_AMV_FORCE])
+        kx.append(kx_now())
+        speed.append(state[K.Y_U])
+        mass.append(_fluid_mass(model, state[K.Y_B]))
+
     try:
         # inside the first deflation: sample every step
         while step < n_total and step < max_window_steps:
             model.advance(state, step * dt, 1, command)
             step += 1
-            d = sample()
-            times.append(step * dt)
-            thrust.append(d[K.D_THRUST])
-            amv.append(d[K.D_AMV_FORCE])
-            kx.append(kx_now())
-            speed.append(state[K.Y_U])
-            mass.append(_fluid_mass(model, state[K.Y_B]))
+            record(step * dt)
             if state[K.Y_W] < 0.0:
                 went_negative = True
             elif went_negative:
@@ -111,13 +114,7 @@ def section41_figures(model, duration_s: float = 20.0, settle_window_s: float = 
             n = min(n_sample - step % n_sample, n_total - step)
             model.advance(state, step * dt, n, command)
             step += n
-            d = sample()
-            times.append(step * dt)
-            thrust.append(d[K.D_THRUST])
-            amv.append(d[K.D_AMV_FORCE])
-            kx.append(kx_now())
-            speed.append(state[K.Y_U])
-            mass.append(_fluid_mass(model, state[K.Y_B]))
+            record(step * dt)
     except SimulationBlowUp as err:
         blow_up_s = err.time_s
         cause = str(err).split(': ', 1)[-1].split(' (')[0]
