@@ -27,6 +27,9 @@ Parameters
                   matched subscription (default: none; lets a consumer started together with the
                   replay receive the first messages)
   delay_s         wall seconds to wait before playing, after wait_for_topics (default 0.0)
+  replay_commands also replay the recorded commands (pulsejet/cmd/*) when `topics` is not given
+                  (default false: a replay next to a live sim_node must not drive it; a topic listed
+                  in `topics` is always replayed)
 
 A bad parameter (missing file, not an MCAP, rate <= 0 or NaN, unknown topic...) prints one line
 `replay: error: <name>=<value> rejected; allowed: ...` to stderr and exits 2. The node exits 0 at
@@ -64,7 +67,7 @@ ACK_TIMEOUT_S = 2.0       # at exit, wait at most this long for subscribers to a
 MIN_PASS_S = 0.01         # a looping pass lasts at least this long (a one-instant file does not spin)
 MAX_CLOCK_TICKS = 10_000_000   # generated /clock ticks per pass (a damaged log time must not exhaust memory)
 PARAMETERS = ('bag', 'rate', 'loop', 'start_offset_s', 'topics', 'publish_clock', 'clock_rate_hz',
-              'wait_for_topics', 'delay_s')
+              'wait_for_topics', 'delay_s', 'replay_commands')
 
 
 class ConfigError(ValueError):
@@ -82,6 +85,7 @@ class ReplayConfig:
     clock_rate_hz: float = 100.0
     wait_for_topics: tuple[str, ...] = ()
     delay_s: float = 0.0
+    replay_commands: bool = False
 
 
 @dataclass
@@ -179,6 +183,7 @@ def check_config(values: dict[str, Any]) -> ReplayConfig:
                               'a finite rate in (0, 10000] Hz', 0.0, True, 10000.0),
         wait_for_topics=_topic_list('wait_for_topics', values.get('wait_for_topics')) or (),
         delay_s=_number('delay_s', values.get('delay_s', 0.0), 'a finite number of seconds >= 0', 0.0, False),
+        replay_commands=_boolean('replay_commands', values.get('replay_commands', False)),
     )
 
 
@@ -195,6 +200,12 @@ def load_recording(path: str | Path) -> Recording:
     messages.sort(key=lambda m: m[0])
     return Recording(Path(path), messages, dict(info.topics), messages[0][0], messages[-1][0], info.truncated,
                      info.damage_report())
+
+
+def is_command_topic(topic: str) -> bool:
+    """A simulator command topic (any namespace): replayed only on request."""
+    from pulsejet_sim.interface import COMMAND_TOPICS, TOPIC_CMD_COMMAND
+    return any(topic.endswith('/' + name) for name in COMMAND_TOPICS + (TOPIC_CMD_COMMAND,))
 
 
 def build_schedule(rec: Recording, cfg: ReplayConfig) -> Schedule:
@@ -215,7 +226,9 @@ def build_schedule(rec: Recording, cfg: ReplayConfig) -> Schedule:
     def wanted(topic: str) -> bool:
         if topic == CLOCK_TOPIC:
             return cfg.publish_clock
-        return cfg.topics is None or topic in cfg.topics
+        if cfg.topics is not None:
+            return topic in cfg.topics
+        return cfg.replay_commands or not is_command_topic(topic)
 
     events = [Event(ns - base, topic, payload) for ns, topic, payload in rec.messages
               if ns >= base and wanted(topic)]
@@ -383,7 +396,8 @@ def read_parameters(node: Any) -> dict[str, Any]:
     from rcl_interfaces.msg import ParameterDescriptor
     dyn = ParameterDescriptor(dynamic_typing=True)
     defaults = {'bag': '', 'rate': 1.0, 'loop': False, 'start_offset_s': 0.0, 'topics': None,
-                'publish_clock': True, 'clock_rate_hz': 100.0, 'wait_for_topics': None, 'delay_s': 0.0}
+                'publish_clock': True, 'clock_rate_hz': 100.0, 'wait_for_topics': None, 'delay_s': 0.0,
+                'replay_commands': False}
     values = {name: node.declare_parameter(name, default, dyn).value for name, default in defaults.items()}
     overrides = getattr(node, '_parameter_overrides', {}) or {}
     for name in overrides:   # a misspelt -p name:=value would otherwise be ignored silently

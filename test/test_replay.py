@@ -220,7 +220,11 @@ def test_replay_bad_files_exit_2(tmp_path: Path) -> None:
 def test_schedule_offsets_filter_and_generated_clock(recording: Path, recording_without_clock: Path) -> None:
     rec = load_recording(recording)
     sched = build_schedule(rec, check_config({'bag': str(recording)}))
-    assert len(sched.events) == len(rec.messages) and not sched.generated_clock
+    commands = [m for m in rec.messages if '/cmd/' in m[1]]
+    assert commands and not any('/cmd/' in e.topic for e in sched.events)     # not replayed by default
+    assert len(sched.events) == len(rec.messages) - len(commands) and not sched.generated_clock
+    with_commands = build_schedule(rec, check_config({'bag': str(recording), 'replay_commands': True}))
+    assert len(with_commands.events) == len(rec.messages)
     offsets = [e.offset_ns for e in sched.events]
     assert offsets == sorted(offsets) and offsets[0] == 0 and offsets[-1] == 1_000_000_000
     assert sched.wall_duration_s(2.0) == pytest.approx(0.5)
