@@ -100,10 +100,13 @@ def summarize(path: str | Path) -> dict[str, Any]:
     # a live recording logs wall time: simulated over wall seconds is the real-time factor achieved;
     # an offline run logs simulation time itself (the factor is then not a property of the file)
     out['real_time_factor'] = math.nan
-    if span and info.first_log_ns is not None and info.last_log_ns > info.first_log_ns:
-        wall = (info.last_log_ns - info.first_log_ns) * 1e-9
-        if abs(info.first_log_ns * 1e-9 - span[0]) > 1.0:        # log times are not simulation times
-            out['real_time_factor'] = out['duration_s'] / wall
+    if span and info.first_log_ns is not None and abs(info.first_log_ns * 1e-9 - span[0]) > 1.0:
+        # log times are not simulation times: the first and last /clock message give the wall span
+        # of the run (other topics, e.g. a late /diagnostics, would stretch it)
+        clock = [(m.log_time_ns, m.msg.clock.sec + 1e-9 * m.msg.clock.nanosec)
+                 for m in iter_bag(p, topics=['/clock'])]
+        if len(clock) >= 2 and clock[-1][0] > clock[0][0]:
+            out['real_time_factor'] = (clock[-1][1] - clock[0][1]) / ((clock[-1][0] - clock[0][0]) * 1e-9)
 
     velocity = get(VELOCITY)
     if velocity is not None and len(velocity[0]):

@@ -61,9 +61,12 @@ def tail(path: Path, lines: int = 25) -> str:
 
 
 def make_recorder(node, path: Path):
-    """In-process recorder of every pulsejet topic (commands, ledger and /clock included)."""
+    """In-process recorder of every pulsejet topic (commands, ledger and /clock included) and of
+    /diagnostics (the node's health: achieved real-time factor, dropped time, watchdog, faults)."""
+    from pulsejet_sim import messages
     from pulsejet_sim.recorder import Recorder
-    return Recorder(node, str(path), None)
+    return Recorder(node, str(path), list(messages.TOPIC_TYPES)
+                    + [f'{messages.TOPIC_DIAGNOSTICS}:diagnostic_msgs/msg/DiagnosticArray'])
 
 
 def run_demo(scene: str, duration_s: float, real_time_factor: float, out: Path,
