@@ -39,7 +39,8 @@ Figures (computed from the run's published samples, `FIGURES` below):
 - burst_speed_m_s: the largest forward velocity sample in the window; min_speed_m_s the smallest;
 - stroke_volume_m3: max - min cavity volume within each whole period of the window, averaged over
   the periods (with an explicit [start_s, end_s] window: max - min over the window);
-- max_radius_m: the largest mantle radius in the window; peak_thrust_n: the largest jet thrust.
+- max_radius_m: the largest published mantle radius in the window (shell: at mid-meridian); peak_thrust_n:
+  the largest jet thrust.
 
 Residuals: targets: (model - value) / sigma per figure. Recording: model minus recorded velocity
 and volume, the model linearly interpolated onto the recording's sample times (recording time -
@@ -70,7 +71,7 @@ FIGURES = {
     'burst_speed_m_s': 'largest forward velocity sample in the window (m/s)',
     'min_speed_m_s': 'smallest forward velocity sample in the window (m/s)',
     'stroke_volume_m3': 'max - min cavity volume per whole period, averaged over the window (m^3)',
-    'max_radius_m': 'largest mantle radius in the window (m)',
+    'max_radius_m': 'largest published mantle radius in the window (m)',
     'peak_thrust_n': 'largest jet thrust in the window (N)',
 }
 SIGNALS = {'velocity': 'pulsejet/velocity', 'volume': 'pulsejet/volume'}

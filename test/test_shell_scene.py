@@ -115,7 +115,8 @@ def test_observation_profile_and_routine_command():
     obs = model.observe(state, 0.1, Command())
     assert isinstance(obs, Observation)
     r, z = model.profile(state)
-    assert obs.mantle_radius_m == pytest.approx(r.max())
+    assert obs.mantle_radius_m == r[model.mid_node] < model.ref.r0[model.mid_node]   # moves with the pull
+    assert model.ref.X[model.mid_node] == pytest.approx(0.5 * model.ref.X[-1], abs=model.ref.X[-1] / 100)
     assert obs.volume_m3 < model.ref.volume_m3()            # contracting
     assert obs.jet_speed_m_s > 0 and obs.thrust_n > 0 and obs.cavity_pressure_pa > 0
     assert obs.fluid_mass_kg == pytest.approx(1022.0 * obs.volume_m3)

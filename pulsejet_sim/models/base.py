@@ -78,7 +78,7 @@ class Observation:
     position_m: float            # vehicle axial position, forward +
     velocity_m_s: float
     acceleration_m_s2: float
-    mantle_radius_m: float       # largest mantle radius (lumped model: minor semi-axis b)
+    mantle_radius_m: float       # shell: radius at mid-meridian; lumped model: minor semi-axis b
     volume_m3: float             # fluid volume in the cavity
     fluid_mass_kg: float
     thrust_n: float              # jet momentum thrust on the vehicle, forward +

@@ -232,6 +232,9 @@ class ShellModel:
         self.initial_velocity_m_s = initial_velocity_m_s
         self.duration_s = duration_s
         self.n_nodes = profile.X.size
+        # the published mantle radius: the node at half the meridian's length, which moves with the
+        # mantle (the largest radius is often the clamped ring's, constant)
+        self.mid_node = int(np.argmin(np.abs(profile.X - 0.5 * profile.X[-1])))
         self.substep_events = 0
         self.specialise_kernel = False
         self._initial_energy = None
@@ -668,7 +671,7 @@ class ShellModel:
         rho = self.P[sk.P_RHO]
         return Observation(
             time_s=float(time_s), position_m=float(T[sk.S_X]), velocity_m_s=float(T[sk.S_U]),
-            acceleration_m_s2=float(T[sk.S_A]), mantle_radius_m=float(st[sk.T_RMAX]), volume_m3=vol,
+            acceleration_m_s2=float(T[sk.S_A]), mantle_radius_m=float(state[3 * self.mid_node]), volume_m3=vol,
             fluid_mass_kg=float(rho * vol), thrust_n=float(T[sk.S_THR]), added_mass_force_n=0.0,
             drag_n=float(T[sk.S_BDRAG]), jet_speed_m_s=float(T[sk.S_UJ]), cavity_pressure_pa=float(T[sk.S_P]),
             pump_flow_m3_s=0.0, valve_opening=1.0)
