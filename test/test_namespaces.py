@@ -61,3 +61,46 @@ def test_two_namespaced_robots_in_one_domain(monkeypatch, tmp_path):
             log.close()
     for proc, _ in procs:
         assert proc.returncode == 0, (tmp_path / 'robot1.log').read_text()[-2000:]
+
+
+@pytest.mark.timeout(180)
+def test_shell_mantle_marker_is_the_revolved_meridian(monkeypatch, tmp_path):
+    """sim_node (shell robot) publishes the mantle surface as a TRIANGLE_LIST Marker in the body
+    frame: every vertex lies on a circle of a meridian node's radius about the swimming axis."""
+    import math
+    from geometry_msgs.msg import PolygonStamped
+    from visualization_msgs.msg import Marker
+    from pulsejet_sim import messages
+    domain = isolate_ros(monkeypatch, 59)
+    log = open(tmp_path / 'sim.log', 'wb')
+    proc = subprocess.Popen(node_command('pulsejet_sim.sim_node', {'scene': 'shell_robot'}), stdout=log,
+                            stderr=subprocess.STDOUT)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node('marker_probe', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    got = {}
+    qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(Marker, messages.TOPIC_MANTLE_MARKER, lambda m: got.setdefault('marker', m), qos)
+    profiles = {}
+    node.create_subscription(PolygonStamped, messages.TOPIC_MANTLE_PROFILE,
+                             lambda m: profiles.__setitem__((m.header.stamp.sec, m.header.stamp.nanosec), m), qos)
+    try:
+        end = time.monotonic() + 120
+        while time.monotonic() < end and 'marker' not in got:
+            executor.spin_once(timeout_sec=0.05)
+        marker = got['marker']
+        assert marker.type == Marker.TRIANGLE_LIST and marker.header.frame_id == messages.BASE_FRAME_ID
+        profile = profiles[(marker.header.stamp.sec, marker.header.stamp.nanosec)].polygon.points  # same state
+        assert len(marker.points) == 6 * messages.MANTLE_MARKER_SEGMENTS * (len(profile) - 1)
+        meridian = {(round(p.x, 5), round(p.y, 5)) for p in profile}      # (axial, radius) of each node
+        assert {(round(p.x, 5), round(math.hypot(p.y, p.z), 5)) for p in marker.points} == meridian
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        proc.terminate()
+        proc.wait(20)
+        log.close()
+    assert proc.returncode == 0, (tmp_path / 'sim.log').read_text()[-2000:]
