@@ -188,9 +188,8 @@ def format_summary(summary: dict[str, Any]) -> str:
 def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
     """PNG with 4 stacked panels against simulation time: mantle radius (mm), volume (ml),
     velocity (m/s), thrust (N). Default output: the MCAP path with suffix .png. Returns its path."""
-    import matplotlib
-    matplotlib.use('Agg')  # no display needed; must precede pyplot
-    import matplotlib.pyplot as plt
+    # a Figure of its own, no pyplot: the caller's backend and figures are left alone
+    from matplotlib.figure import Figure
 
     p = Path(path)
     info = BagInfo(p)
@@ -201,7 +200,8 @@ def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
         raise AnalysisError(f'{str(p)!r} has no pulsejet state topics (found {sorted(info.topics) or "none"}); '
                             f'expected some of {", ".join(rel for rel, _, _ in panels)}')
     out = Path(png_path) if png_path is not None else p.with_suffix('.png')
-    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(8, 9), constrained_layout=True)
+    fig = Figure(figsize=(8, 9), constrained_layout=True)
+    axes = fig.subplots(len(panels), 1, sharex=True)
     for ax, (rel, scale, label) in zip(axes, panels):
         name = find_topic(series, rel)
         if name is not None:
@@ -215,7 +215,6 @@ def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
     axes[0].set_title(p.name)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
-    plt.close(fig)
     return out
 
 

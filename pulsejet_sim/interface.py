@@ -31,6 +31,10 @@ SERVICE_RESET = 'pulsejet/reset'
 # The command the simulator actually held from the stamped simulation time on (after validation):
 # what re-simulation replays step for step.
 TOPIC_APPLIED_COMMAND = 'pulsejet/applied_command'
+# The mantle surface (the meridian revolved) as a visualization_msgs/Marker TRIANGLE_LIST for RViz
+# and Foxglove, at the energy ledger's rate; not recorded by default (a view, not data)
+TOPIC_MANTLE_MARKER = 'pulsejet/mantle_marker'
+MANTLE_MARKER_SEGMENTS = 24
 # The mantle's meridian in the body frame: x = axial position (m, forward +), y = radius (m).
 TOPIC_MANTLE_PROFILE = 'pulsejet/mantle_profile'
 APPLIED_COMMAND_NAMES = ('pump_flow_m3_s', 'valve_opening', 'cable_force_n')

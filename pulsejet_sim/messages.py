@@ -11,8 +11,9 @@ from typing import Any, Mapping
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point32, PolygonStamped, TwistStamped, WrenchStamped
+from geometry_msgs.msg import Point, Point32, PolygonStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Odometry
+from visualization_msgs.msg import Marker
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -29,6 +30,8 @@ from pulsejet_sim.interface import (  # noqa: F401  (re-exported: the names of e
     TOPIC_FLUID_MASS,
     TOPIC_CLOCK,
     TOPIC_ODOMETRY,
+    TOPIC_MANTLE_MARKER,
+    MANTLE_MARKER_SEGMENTS,
     ODOM_FRAME_ID,
     BASE_FRAME_ID,
     TOPIC_CMD_PUMP_FLOW,
@@ -221,4 +224,30 @@ def profile_message(r_m, z_m, time_s: float, frame_id: str = FRAME_ID) -> Polygo
     msg.header.stamp = stamp(time_s)
     msg.header.frame_id = frame_id
     msg.polygon.points = [Point32(x=float(z), y=float(r), z=0.0) for r, z in zip(r_m, z_m)]
+    return msg
+
+
+def mantle_marker(r_m, z_m, time_s: float, frame_id: str = FRAME_ID,
+                  segments: int = MANTLE_MARKER_SEGMENTS) -> Marker:
+    """The mantle surface as a Marker TRIANGLE_LIST: the meridian (node radii r_m, axial positions
+    z_m, m) revolved about the body's x axis in `segments` facets, two triangles per element and facet."""
+    import math as _m
+    msg = Marker()
+    msg.header.stamp = stamp(time_s)
+    msg.header.frame_id = frame_id
+    msg.ns = 'pulsejet/mantle'
+    msg.id = 0
+    msg.type = Marker.TRIANGLE_LIST
+    msg.action = Marker.ADD
+    msg.pose.orientation.w = 1.0
+    msg.scale.x = msg.scale.y = msg.scale.z = 1.0
+    msg.color.r, msg.color.g, msg.color.b, msg.color.a = 0.95, 0.55, 0.35, 0.8
+    angles = [2.0 * _m.pi * k / segments for k in range(segments + 1)]
+    ring = [[Point(x=float(z), y=float(r) * _m.cos(a), z=float(r) * _m.sin(a)) for a in angles]
+            for r, z in zip(r_m, z_m)]
+    points = []
+    for lower, upper in zip(ring, ring[1:]):
+        for k in range(segments):
+            points += [lower[k], upper[k], upper[k + 1], lower[k], upper[k + 1], lower[k + 1]]
+    msg.points = points
     return msg

@@ -489,11 +489,10 @@ def write_history(result: OptimizeResult, path: Path) -> Path:
 
 
 def plot_convergence(result: OptimizeResult, path: Path) -> Path:
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure   # no pyplot: the caller's backend is left alone
     spec = result.spec
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig = Figure(figsize=(8, 4.5))
+    ax = fig.subplots()
     x = [h['eval'] + 1 for h in result.history]
     y = [h['row'].metrics.get(spec.objective, math.nan) if not h['row'].fault else math.nan for h in result.history]
     ax.plot(x, y, 'o', color='tab:blue', ms=4, label='run')
@@ -517,7 +516,6 @@ def plot_convergence(result: OptimizeResult, path: Path) -> Path:
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 

@@ -149,6 +149,9 @@ class SimNode(Node):
         if self.has_profile:
             self._pubs[messages.TOPIC_MANTLE_PROFILE] = self.create_publisher(
                 messages.message_class(messages.TOPIC_MANTLE_PROFILE), messages.TOPIC_MANTLE_PROFILE, reliable)
+            from visualization_msgs.msg import Marker
+            self._pubs[messages.TOPIC_MANTLE_MARKER] = self.create_publisher(
+                Marker, messages.TOPIC_MANTLE_MARKER, reliable)
         from diagnostic_msgs.msg import DiagnosticArray
         self._diag_pub = self.create_publisher(DiagnosticArray, messages.TOPIC_DIAGNOSTICS, reliable)
         for topic, field in messages.COMMAND_FIELDS.items():
@@ -273,14 +276,18 @@ class SimNode(Node):
     def _publish(self, obs, ledger=False):
         if not eng.observation_is_finite(obs):   # never publish NaN
             return
-        if self.has_profile:   # before /clock, which the state's consumers take as its end
-            profile = self.sim.profile()
-            if profile is not None and all(math.isfinite(float(v)) for arr in profile for v in arr):
-                self._pubs[messages.TOPIC_MANTLE_PROFILE].publish(messages.profile_message(*profile, obs.time_s))
+        profile = self.sim.profile() if self.has_profile else None
+        if profile is not None and not all(math.isfinite(float(v)) for arr in profile for v in arr):
+            profile = None
+        if profile is not None:   # before /clock, which the state's consumers take as its end
+            self._pubs[messages.TOPIC_MANTLE_PROFILE].publish(messages.profile_message(*profile, obs.time_s))
         for topic, msg in messages.observation_messages(obs, messages.FRAME_ID, *self.frames):
             self._pubs[topic].publish(msg)
         if ledger:
             self._publish_ledger(obs.time_s)
+            if profile is not None:   # the 3-D view at the ledger's rate, in the odometry's body frame
+                self._pubs[messages.TOPIC_MANTLE_MARKER].publish(
+                    messages.mantle_marker(*profile, obs.time_s, self.frames[1]))
 
     def _publish_ledger(self, time_s):
         values = self.sim.energy_ledger()

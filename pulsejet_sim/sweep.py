@@ -275,11 +275,10 @@ def write_csv(rows: list[RunRow], path: Path, timing: bool = True) -> Path:
 
 
 def plot_bars(rows: list[RunRow], metric: str, path: Path) -> Path:
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure   # no pyplot: the caller's backend is left alone
     studies = list(dict.fromkeys(r.study for r in rows))
-    fig, axes = plt.subplots(len(studies), 1, figsize=(max(8, 0.3 * len(rows)), 3.5 * len(studies)), squeeze=False)
+    fig = Figure(figsize=(max(8, 0.3 * len(rows)), 3.5 * len(studies)))
+    axes = fig.subplots(len(studies), 1, squeeze=False)
     for ax, study in zip(axes[:, 0], studies):
         group = [r for r in rows if r.study == study]
         values = [r.metrics.get(metric, 0.0) for r in group]
@@ -292,7 +291,6 @@ def plot_bars(rows: list[RunRow], metric: str, path: Path) -> Path:
         ax.grid(axis='y', alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 

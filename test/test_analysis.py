@@ -109,3 +109,20 @@ def test_real_time_factor_of_a_live_recording(tmp_path: Path) -> None:
                 bag.write_message(topic, msg, wall0_ns + round(2 * t * 1e9))
     assert analysis.summarize(path)['real_time_factor'] == pytest.approx(0.5)
     assert 'real-time factor    0.5' in analysis.format_summary(analysis.summarize(path))
+
+
+def test_plots_leave_the_callers_matplotlib_alone(run_file: Path, tmp_path: Path) -> None:
+    """analysis.plot, sweep.plot_bars draw on Figures of their own: the caller's backend stays and
+    no pyplot figure is left open."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+    from pulsejet_sim.sweep import RunRow, plot_bars
+    matplotlib.use('svg')
+    try:
+        before = len(plt.get_fignums())
+        assert analysis.plot(run_file, tmp_path / 'a.png').stat().st_size > 0
+        row = RunRow(name='s/x', study='s', labels={'x': 'a'}, metrics={'peak_speed_m_s': 1.0})
+        assert plot_bars([row], 'peak_speed_m_s', tmp_path / 'b.png').stat().st_size > 0
+        assert matplotlib.get_backend() == 'svg' and len(plt.get_fignums()) == before
+    finally:
+        matplotlib.use('agg')
