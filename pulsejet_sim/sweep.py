@@ -34,7 +34,6 @@ import concurrent.futures as futures
 import contextlib
 import csv
 import itertools
-import math
 import multiprocessing
 import os
 import sys
@@ -234,29 +233,45 @@ def run_sweep(runs: list[RunSpec], executor: futures.Executor | None = None, wor
     """Run every spec through `executor` (default: a local process pool); rows in the runs' order."""
     own = executor is None
     executor = executor or local_executor(workers)
-    start = time.perf_counter()
     rows: dict[int, RunRow] = {}
+    bar = Progress(len(runs), progress)
     try:
         pending = {executor.submit(run_one, spec): i for i, spec in enumerate(runs)}
         for done in futures.as_completed(pending):
             rows[pending[done]] = done.result()
-            if progress is not None:
-                _progress(progress, len(rows), len(runs), time.perf_counter() - start)
+            bar.update()
     finally:
+        bar.close()
         if own:
             executor.shutdown(cancel_futures=True)
-    if progress is not None:
-        progress.write('\n')
     return [rows[i] for i in range(len(runs))]
 
 
-def _progress(stream, done: int, total: int, elapsed_s: float) -> None:
-    width = 30
-    filled = int(width * done / max(total, 1))
-    eta = elapsed_s / done * (total - done) if done else math.nan
-    stream.write(f'\r[{"#" * filled}{"." * (width - filled)}] {done}/{total} runs, '
-                 f'{elapsed_s:5.1f} s elapsed, ~{eta:5.1f} s left')
-    stream.flush()
+class Progress:
+    """Progress of `total` runs on `stream` (None: silent): a tqdm bar on a terminal; in a log (not
+    a terminal) one plain line per tenth of the runs, never carriage returns."""
+
+    def __init__(self, total: int, stream=sys.stderr):
+        self.total, self.stream, self.done = total, stream, 0
+        self.start = time.perf_counter()
+        self.bar = None
+        if stream is not None and getattr(stream, 'isatty', lambda: False)():
+            from tqdm import tqdm
+            self.bar = tqdm(total=total, file=stream, unit='run', dynamic_ncols=True)
+
+    def update(self) -> None:
+        self.done += 1
+        if self.bar is not None:
+            self.bar.update(1)
+        elif self.stream is not None and (self.done == self.total or self.done % max(1, self.total // 10) == 0):
+            elapsed = time.perf_counter() - self.start
+            self.stream.write(f'{self.done}/{self.total} runs, {elapsed:.1f} s elapsed, '
+                              f'~{elapsed / self.done * (self.total - self.done):.1f} s left\n')
+            self.stream.flush()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def write_csv(rows: list[RunRow], path: Path, timing: bool = True) -> Path:
