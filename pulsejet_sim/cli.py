@@ -53,24 +53,35 @@ def _lazy(module: str, function: str):
     return call
 
 
+#: command -> (what it does, its entry point); each entry point parses its own options (argparse)
+COMMANDS = {
+    'run': ('run a scene offline (no DDS) and record it to MCAP', _run),
+    'summary': ('key numbers of a recording (live or offline)', _lazy('analysis', 'main_summary')),
+    'plot': ('radius, volume, velocity and thrust of a recording as a PNG', _lazy('analysis', 'main_plot')),
+    'resim': ('re-simulate a recording from its applied commands and compare', _lazy('resim', 'main_resim')),
+    'repair': ('write a complete copy of a damaged recording, metadata kept', _lazy('bag.repair', 'main_repair')),
+    'sweep': ('a grid of scenes on a process pool or Dask', _lazy('sweep', 'main_sweep')),
+    'fit': ('calibrate scene parameters to figures or a recording', _lazy('fit', 'main_fit')),
+    'optimize': ('search scene parameters (differential evolution) on a process pool or Dask',
+                 _lazy('optimize', 'main_optimize')),
+    'scenes': ('list the scenes under config/', _scenes),
+}
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    commands = {'run': _run, 'summary': _lazy('analysis', 'main_summary'), 'plot': _lazy('analysis', 'main_plot'),
-                'resim': _lazy('resim', 'main_resim'), 'repair': _lazy('bag.repair', 'main_repair'),
-                'sweep': _lazy('sweep', 'main_sweep'),
-                'fit': _lazy('fit', 'main_fit'), 'optimize': _lazy('optimize', 'main_optimize'),
-                'scenes': _scenes}
-    if not argv or argv[0] in ('-h', '--help') or argv[0] not in commands:
-        if argv and argv[0] not in ('-h', '--help'):
-            print(f'pulsejet: unknown command {argv[0]!r}; allowed: {", ".join(commands)}', file=sys.stderr)
-        print('usage: pulsejet {run SCENE [--duration S] [--out FILE.mcap] | summary FILE.mcap | '
-              'plot FILE.mcap [--out PNG] | resim FILE.mcap [--scene S] [--tolerance T] | '
-              'repair FILE.mcap [--out NEW.mcap] | '
-              'sweep SWEEP.yaml [--workers N | --dask-workers N | --scheduler tcp://HOST:PORT] [--out DIR] '
-              '[--no-timing] | fit FIT.yaml [--out DIR] [--max-evals N] | optimize OPT.yaml [--out DIR] '
-              '[--max-evals N] [--workers N | --dask-workers N | --scheduler tcp://HOST:PORT] | scenes}', file=sys.stderr)
-        return 0 if argv and argv[0] in ('-h', '--help') else 2
-    return int(commands[argv[0]](argv[1:]) or 0)
+    parser = argparse.ArgumentParser(
+        prog='pulsejet', description='pulsejet offline tools (no DDS). `pulsejet COMMAND -h` shows the options '
+                                     'of a command.')
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
+    for name, (text, _) in COMMANDS.items():
+        # the command's own argparse parses the rest (and answers its -h with every option)
+        sub.add_parser(name, help=text, add_help=False)
+    try:
+        args, _ = parser.parse_known_args(argv[:1])
+    except SystemExit as exit_:
+        return int(exit_.code or 0)
+    return int(COMMANDS[args.command][1](argv[1:]) or 0)
 
 
 if __name__ == '__main__':

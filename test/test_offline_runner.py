@@ -113,3 +113,14 @@ def test_shell_scene_is_deterministic():
     assert a.sim.steps == b.sim.steps == 50
     assert np.array_equal(a.sim.state, b.sim.state)
     assert a.sim.observe().velocity_m_s > 0.0
+
+
+def test_cli_lists_every_command_and_refuses_an_unknown_one():
+    out = subprocess.run(PULSEJET + ['-h'], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0
+    for command in ('run', 'summary', 'plot', 'resim', 'repair', 'sweep', 'fit', 'optimize', 'scenes'):
+        assert f'\n    {command} ' in out.stdout, out.stdout
+    bad = subprocess.run(PULSEJET + ['swim'], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "invalid choice: 'swim'" in bad.stderr and "'run'" in bad.stderr
+    opts = subprocess.run(PULSEJET + ['run', '-h'], capture_output=True, text=True, timeout=60)
+    assert opts.returncode == 0 and '--duration' in opts.stdout and '--dt' in opts.stdout
