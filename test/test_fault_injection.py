@@ -30,3 +30,38 @@ def test_watchdog_applies_the_safe_command_when_the_controller_dies(monkeypatch)
         assert d.level == WARN and d.values['watchdog'] == 'tripped (safe)'
         assert 'command watchdog tripped' in h.output()
     assert h.exit_codes.get('sim_node') == 0
+
+
+@pytest.mark.timeout(240)
+def test_a_restarted_sim_node_is_picked_up_by_the_controller_and_the_recorder(monkeypatch, tmp_path):
+    """sim_node killed hard mid-run and started again: controller_node (time went back: its routine
+    restarts) and an in-process recorder go on without a restart; the recording holds both runs."""
+    from pulsejet_sim.harness import NodeProcess
+    from pulsejet_sim.recorder import Recorder
+    from test_recorder import read_all
+    domain = isolate_ros(monkeypatch, 73)
+    out = tmp_path / 'run.mcap'
+    with SimHarness(scene='pump_cycle', controller=True, domain_id=domain, log_dir=tmp_path) as h:
+        recorder = Recorder(h.node, out, None)
+        try:
+            h.spin_until(lambda: h.time_s > 1.0, 60.0, 'the first run to pass 1 s')
+            first = h.processes.pop('sim_node')
+            first.proc.send_signal(signal.SIGKILL)
+            assert first.stop() == -signal.SIGKILL
+            n_before = len(h.applied)
+            params = {'scene': 'pump_cycle', 'pacing': 'real_time'}
+            h.processes['sim_node'] = NodeProcess('pulsejet_sim.sim_node', params, tmp_path / 'sim_node.2.log',
+                                                  h.environment())
+            # the new run starts at t = 0 and the controller commands it again
+            h.spin_until(lambda: 0.3 < h.time_s < 1.0 and len(h.applied) > n_before + 1, 90.0,
+                         'the restarted run to be commanded')
+            h.spin_until(lambda: any(c.pump_flow_m3_s > 0 for _, c, _ in list(h.applied)[n_before:]), 30.0,
+                         'the restarted routine to pump')
+        finally:
+            recorder.close()
+        assert h.processes['controller_node'].alive()
+    ctrl_log = (tmp_path / 'controller_node.log').read_text()
+    assert 'restarting the routine' in ctrl_log, ctrl_log[-2000:]
+    clock = [m.clock.sec + 1e-9 * m.clock.nanosec for m in read_all(out)['/clock']]
+    drop = max(range(1, len(clock)), key=lambda i: clock[i - 1] - clock[i])
+    assert clock[drop - 1] > 1.0 and clock[drop] < 0.2        # the first run, then the second from 0
