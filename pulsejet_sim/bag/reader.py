@@ -150,27 +150,18 @@ def format_version(library: str) -> int | None:
     return int(match.group(1)) if match else None
 
 
+#: the record kinds the reader needs, by opcode; indexes and statistics are rebuilt by whoever needs them
+_RECORDS = {Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel, Opcode.CHUNK: Chunk,
+            Opcode.METADATA: Metadata, Opcode.ATTACHMENT: Attachment, Opcode.DATA_END: DataEnd,
+            Opcode.FOOTER: Footer}
+
+
 def _parse(opcode: int, body: bytes) -> Any:
     stream = ReadDataStream(io.BytesIO(body))
-    if opcode == Opcode.HEADER:
-        return Header.read(stream)
-    if opcode == Opcode.SCHEMA:
-        return Schema.read(stream)
-    if opcode == Opcode.CHANNEL:
-        return Channel.read(stream)
     if opcode == Opcode.MESSAGE:
         return Message.read(stream, len(body))
-    if opcode == Opcode.CHUNK:
-        return Chunk.read(stream)
-    if opcode == Opcode.METADATA:
-        return Metadata.read(stream)
-    if opcode == Opcode.ATTACHMENT:
-        return Attachment.read(stream)
-    if opcode == Opcode.DATA_END:
-        return DataEnd.read(stream)
-    if opcode == Opcode.FOOTER:
-        return Footer.read(stream)
-    return None   # indexes and statistics: rebuilt by whoever needs them
+    record = _RECORDS.get(opcode)
+    return record.read(stream) if record is not None else None
 
 
 def _chunk_records(chunk: Chunk) -> list[Any]:
