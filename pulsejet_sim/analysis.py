@@ -1,11 +1,12 @@
-"""Summary numbers and a 4-panel plot of a pulsejet MCAP recording (live or offline).
+"""Summary numbers and a 4-panel plot of a pulsejet MCAP recording (live or offline); a shell
+recording's plot also shows meridian snapshots over one cycle (pulsejet_sim.profiles).
 
 Reads with pulsejet_sim.bag.reader (no rclpy). Time axes are simulation time (header stamps, or
 log times mapped through /clock; see reader.load_series). Integrals use the trapezoidal rule over
 the recorded samples, so their accuracy is that of the publishing rate.
 
-cli.py calls main_summary(argv) / main_plot(argv); both return a process exit code (2 on bad input,
-with a one-line error naming the file and what was expected).
+cli.py calls main_summary(argv) / main_plot(argv) (profiles.main_animate uses _run too); they return a
+process exit code (2 on bad input, with a one-line error naming the file and what was expected).
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from pulsejet_sim import profiles
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, find_topic, iter_bag, load_series
 
 VELOCITY = 'pulsejet/velocity'
@@ -185,9 +187,15 @@ def format_summary(summary: dict[str, Any]) -> str:
     return '\n'.join(lines)
 
 
-def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
-    """PNG with 4 stacked panels against simulation time: mantle radius (mm), volume (ml),
-    velocity (m/s), thrust (N). Default output: the MCAP path with suffix .png. Returns its path."""
+def plot_figure(path: str | Path) -> Any:
+    """The figure `plot` writes (a matplotlib Figure, no pyplot): 4 stacked panels against simulation
+    time: mantle radius (mm), volume (ml), velocity (m/s), thrust (N).
+
+    A shell recording (mantle profiles recorded, stored scene not `model: lumped`) gets a fifth
+    panel below them, in the same figure and PNG, not sharing their time axis: meridian snapshots
+    (r, z) over the last whole actuation cycle, coloured by phase (profiles.draw_cycle_snapshots);
+    the cycle is shaded on the time panels and the snapshot times are marked on the radius. A lumped
+    recording gives the 4 panels alone, as before (see profiles.is_lumped_recording)."""
     # a Figure of its own, no pyplot: the caller's backend and figures are left alone
     from matplotlib.figure import Figure
 
@@ -199,9 +207,15 @@ def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
     if not any(find_topic(series, rel) for rel, _, _ in panels):
         raise AnalysisError(f'{str(p)!r} has no pulsejet state topics (found {sorted(info.topics) or "none"}); '
                             f'expected some of {", ".join(rel for rel, _, _ in panels)}')
-    out = Path(png_path) if png_path is not None else p.with_suffix('.png')
-    fig = Figure(figsize=(8, 9), constrained_layout=True)
-    axes = fig.subplots(len(panels), 1, sharex=True)
+    shell = profiles.shows_profiles(p, info)
+    fig = Figure(figsize=(9, 12) if shell else (8, 9), constrained_layout=True)
+    if shell:
+        # the time panels keep their shared axis; the meridian panel below has its own (mm)
+        grid = fig.add_gridspec(len(panels) + 1, 1, height_ratios=[1] * len(panels) + [1.2])
+        axes = [fig.add_subplot(grid[0])]
+        axes += [fig.add_subplot(grid[k], sharex=axes[0]) for k in range(1, len(panels))]
+    else:
+        axes = fig.subplots(len(panels), 1, sharex=True)
     for ax, (rel, scale, label) in zip(axes, panels):
         name = find_topic(series, rel)
         if name is not None:
@@ -213,6 +227,35 @@ def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
         ax.grid(True, alpha=0.3)
     axes[-1].set_xlabel('simulation time [s]')
     axes[0].set_title(p.name)
+    if shell:
+        snapshot_ax = fig.add_subplot(grid[len(panels)], label=SNAPSHOT_AXES_LABEL)
+        snapshots = profiles.draw_cycle_snapshots(snapshot_ax, p, series, info)
+        if snapshots is not None:
+            _mark_snapshots(axes, series, snapshots)
+    return fig
+
+
+SNAPSHOT_AXES_LABEL = 'mantle snapshots'   # the label of the meridian panel's Axes (tests find it by it)
+
+
+def _mark_snapshots(time_axes: Sequence[Any], series: dict[str, tuple[np.ndarray, np.ndarray]],
+                    snapshots: Any) -> None:
+    """Shade the snapshot cycle on the time panels and mark the snapshot times on the radius, in the
+    snapshots' colours, so the meridians can be read against the signals."""
+    for ax in time_axes:
+        ax.axvspan(snapshots.cycle.start_s, snapshots.cycle.end_s, color='0.5', alpha=0.12, lw=0)
+    name = find_topic(series, MANTLE_RADIUS)
+    if name is not None and len(series[name][0]):
+        t, radius_m = series[name]
+        time_axes[0].scatter(snapshots.time_s, np.interp(snapshots.time_s, t, radius_m) * 1e3,
+                             c=snapshots.colors, s=28, zorder=3, edgecolors='k', linewidths=0.5)
+
+
+def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
+    """Write plot_figure(path) as a PNG (default: the MCAP path with suffix .png). Returns its path."""
+    p = Path(path)
+    fig = plot_figure(p)
+    out = Path(png_path) if png_path is not None else p.with_suffix('.png')
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
     return out
@@ -224,7 +267,7 @@ def _run(prog: str, argv: Sequence[str] | None, build, action) -> int:
     args = parser.parse_args(argv)
     try:
         action(args)
-    except (BagReadError, AnalysisError) as exc:
+    except (BagReadError, AnalysisError, profiles.ProfileError) as exc:
         print(f'{prog}: error: {exc}', file=sys.stderr)
         return 2
     except BrokenPipeError:     # output piped into `head`: nothing left to say
@@ -248,7 +291,7 @@ def main_summary(argv: Sequence[str] | None = None) -> int:
 
 
 def main_plot(argv: Sequence[str] | None = None) -> int:
-    """`pulsejet plot FILE.mcap [--out PNG]`: write the 4-panel PNG and print its path."""
+    """`pulsejet plot FILE.mcap [--out PNG]`: write the PNG of plot_figure and print its path."""
     def build(parser: argparse.ArgumentParser) -> None:
         parser.add_argument('file', help='MCAP recording (.mcap)')
         parser.add_argument('--out', default=None, help='PNG path (default: FILE with .png suffix)')

@@ -1,6 +1,6 @@
 """`pulsejet`: offline tools. `pulsejet run SCENE`, `pulsejet summary FILE.mcap`, `pulsejet plot FILE.mcap`,
-`pulsejet resim FILE.mcap`, `pulsejet repair FILE.mcap`, `pulsejet sweep SWEEP`, `pulsejet fit FIT`,
-`pulsejet optimize OPT`, `pulsejet scenes`."""
+`pulsejet animate FILE.mcap`, `pulsejet resim FILE.mcap`, `pulsejet repair FILE.mcap`, `pulsejet sweep SWEEP`,
+`pulsejet fit FIT`, `pulsejet optimize OPT`, `pulsejet scenes`."""
 from __future__ import annotations
 
 import argparse
@@ -57,7 +57,9 @@ def _lazy(module: str, function: str):
 COMMANDS = {
     'run': ('run a scene offline (no DDS) and record it to MCAP', _run),
     'summary': ('key numbers of a recording (live or offline)', _lazy('analysis', 'main_summary')),
-    'plot': ('radius, volume, velocity and thrust of a recording as a PNG', _lazy('analysis', 'main_plot')),
+    'plot': ('radius, volume, velocity and thrust of a recording as a PNG (+ mantle snapshots over a '
+             'cycle for shell runs)', _lazy('analysis', 'main_plot')),
+    'animate': ('the mantle section of a shell recording as a GIF or MP4', _lazy('profiles', 'main_animate')),
     'resim': ('re-simulate a recording from its applied commands and compare', _lazy('resim', 'main_resim')),
     'repair': ('write a complete copy of a damaged recording, metadata kept', _lazy('bag.repair', 'main_repair')),
     'sweep': ('a grid of scenes on a process pool or Dask', _lazy('sweep', 'main_sweep')),
