@@ -20,14 +20,13 @@ import numpy as np
 
 from pulsejet_sim import profiles
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, find_topic, iter_bag, load_series
-
-VELOCITY = 'pulsejet/velocity'
-THRUST = 'pulsejet/thrust'
-MANTLE_RADIUS = 'pulsejet/mantle_radius'
-VOLUME = 'pulsejet/volume'
-FLUID_MASS = 'pulsejet/fluid_mass'
-ENERGY_LEDGER = 'pulsejet/energy_ledger'
-LEDGER_STATUS_NAME = 'pulsejet energy ledger'   # same as messages.LEDGER_STATUS_NAME (no rclpy here)
+from pulsejet_sim.interface import LEDGER_STATUS_NAME
+from pulsejet_sim.interface import TOPIC_ENERGY_LEDGER as ENERGY_LEDGER
+from pulsejet_sim.interface import TOPIC_FLUID_MASS as FLUID_MASS
+from pulsejet_sim.interface import TOPIC_MANTLE_RADIUS as MANTLE_RADIUS
+from pulsejet_sim.interface import TOPIC_THRUST as THRUST
+from pulsejet_sim.interface import TOPIC_VELOCITY as VELOCITY
+from pulsejet_sim.interface import TOPIC_VOLUME as VOLUME
 PULSEJET_TOPICS = (VELOCITY, THRUST, MANTLE_RADIUS, VOLUME, FLUID_MASS, ENERGY_LEDGER)
 
 

@@ -66,6 +66,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from pulsejet_sim import interface
+
 FIGURES = {
     'mean_speed_m_s': 'time-averaged forward velocity over the window (m/s)',
     'burst_speed_m_s': 'largest forward velocity sample in the window (m/s)',
@@ -74,7 +76,7 @@ FIGURES = {
     'max_radius_m': 'largest published mantle radius in the window (m)',
     'peak_thrust_n': 'largest jet thrust in the window (N)',
 }
-SIGNALS = {'velocity': 'pulsejet/velocity', 'volume': 'pulsejet/volume'}
+SIGNALS = {'velocity': interface.TOPIC_VELOCITY, 'volume': interface.TOPIC_VOLUME}
 TOP_KEYS = ('name', 'description', 'scene', 'duration_s', 'overrides', 'parameters', 'targets', 'predict',
             'recording', 'signals', 'figures', 'options')
 PARAM_KEYS = ('low', 'high', 'initial', 'vary', 'scale')

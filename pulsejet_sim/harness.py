@@ -38,6 +38,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from pulsejet_sim import interface as names
 from pulsejet_sim.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 
@@ -219,22 +220,21 @@ class SimHarness:
         self.executor.add_node(self.node)
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.qos = qos
-        for topic in ('pulsejet/volume', 'pulsejet/mantle_radius', 'pulsejet/fluid_mass'):
+        for topic in (names.TOPIC_VOLUME, names.TOPIC_MANTLE_RADIUS, names.TOPIC_FLUID_MASS):
             self.node.create_subscription(Float64, topic, self._store_value(topic), qos)
-        self.node.create_subscription(TwistStamped, 'pulsejet/velocity',
+        self.node.create_subscription(TwistStamped, names.TOPIC_VELOCITY,
                                       lambda m: self._values.__setitem__('velocity', m.twist.linear.x), qos)
-        self.node.create_subscription(WrenchStamped, 'pulsejet/thrust',
+        self.node.create_subscription(WrenchStamped, names.TOPIC_THRUST,
                                       lambda m: self._values.__setitem__('thrust', m.wrench.force.x), qos)
-        self.node.create_subscription(Clock, '/clock', self._on_clock, qos)
-        self.node.create_subscription(JointState, 'pulsejet/applied_command', self._on_applied, qos)
-        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, qos)
-        self._cmd_pubs = {field: self.node.create_publisher(Float64, topic, qos) for field, topic in (
-            ('pump_flow_m3_s', 'pulsejet/cmd/pump_flow'), ('valve_opening', 'pulsejet/cmd/valve'),
-            ('cable_force_n', 'pulsejet/cmd/cable_force'))}
+        self.node.create_subscription(Clock, names.TOPIC_CLOCK, self._on_clock, qos)
+        self.node.create_subscription(JointState, names.TOPIC_APPLIED_COMMAND, self._on_applied, qos)
+        self.node.create_subscription(DiagnosticArray, names.TOPIC_DIAGNOSTICS, self._on_diagnostics, qos)
+        self._cmd_pubs = {field: self.node.create_publisher(Float64, topic, qos)
+                          for topic, field in names.COMMAND_FIELDS.items()}
         self._clients = {
-            'pause': self.node.create_client(SetBool, 'pulsejet/pause'),
-            'step': self.node.create_client(Trigger, 'pulsejet/step'),
-            'reset': self.node.create_client(Trigger, 'pulsejet/reset'),
+            'pause': self.node.create_client(SetBool, names.SERVICE_PAUSE),
+            'step': self.node.create_client(Trigger, names.SERVICE_STEP),
+            'reset': self.node.create_client(Trigger, names.SERVICE_RESET),
             f'{SIM_NODE_NAME}/set_parameters': self.node.create_client(SetParameters,
                                                                        f'{SIM_NODE_NAME}/set_parameters'),
             f'{SIM_NODE_NAME}/get_parameters': self.node.create_client(GetParameters,
@@ -255,8 +255,8 @@ class SimHarness:
                 return False
             if not all(p.get_subscription_count() > 0 for p in self._cmd_pubs.values()):
                 return False
-            if self.controller and (self.node.count_subscribers('/clock') < 2
-                                    or self.node.count_publishers('pulsejet/cmd/valve') < 2):
+            if self.controller and (self.node.count_subscribers(names.TOPIC_CLOCK) < 2
+                                    or self.node.count_publishers(names.TOPIC_CMD_VALVE) < 2):
                 return False
             return bool(self.states)
         self.spin_until(ready, timeout_s=max(0.0, end - time.monotonic()), what='sim_node to start')

@@ -40,12 +40,11 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, find_topic, iter_bag, stamp_to_s
+from pulsejet_sim.interface import TOPIC_APPLIED_COMMAND as APPLIED_COMMAND
+from pulsejet_sim.interface import TOPIC_MANTLE_RADIUS as MANTLE_RADIUS
+from pulsejet_sim.interface import TOPIC_VELOCITY as VELOCITY
+from pulsejet_sim.interface import TOPIC_VOLUME as VOLUME
 from pulsejet_sim.models.base import Command, CommandError, SimulationBlowUp
-
-APPLIED_COMMAND = 'pulsejet/applied_command'
-VELOCITY = 'pulsejet/velocity'
-VOLUME = 'pulsejet/volume'
-MANTLE_RADIUS = 'pulsejet/mantle_radius'
 COMPARED_TOPICS = (VELOCITY, VOLUME, MANTLE_RADIUS)
 # topic -> Observation attribute it carries
 OBSERVATION_FIELD = {VELOCITY: 'velocity_m_s', VOLUME: 'volume_m3', MANTLE_RADIUS: 'mantle_radius_m'}

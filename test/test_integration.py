@@ -101,7 +101,8 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
     # simulation time: stamps from 0 to the duration, the clock reached the duration
     clock = np.array([t for t, _ in bag['/clock']])
     assert clock.min() >= 0 and abs(clock.max() - DURATION_S) < 1e-6, (clock.min(), clock.max())
-    assert np.all(np.diff(clock) >= 0)
+    back = np.flatnonzero(np.diff(clock) < 0)
+    assert back.size == 0, [tuple(clock[max(0, i - 2):i + 3]) for i in back[:5]]
     assert velocity[:, 0].max() <= DURATION_S + 1e-9
 
     # the controller cycled the pump and the valve

@@ -152,3 +152,42 @@ def test_closed_loop_does_not_apply_a_stale_answer():
     held = s.command
     s.accept({'pump_flow_m3_s': 4e-3, 'valve_opening': 1.0}, 0.2, stamp_s=0.0)   # the t=0 state answered again
     assert s.command == held
+
+
+def test_lookahead_computes_ahead_and_stamps_each_state_with_its_wall_time():
+    ahead, plain = make(lookahead_s=0.05), make()
+    for s in (ahead, plain):
+        s.start(0.0)
+    events = ahead.tick(0.01)
+    states = [e for e in events if isinstance(e, eng.Publish)]
+    # the physics runs 5 periods ahead of the wall clock; each state carries its own wall time
+    assert [round(e.observation.time_s, 9) for e in states] == [0.01, 0.02, 0.03, 0.04, 0.05, 0.06]
+    assert [e.due_wall for e in states] == pytest.approx([0.01, 0.02, 0.03, 0.04, 0.05, 0.06])
+    assert all(e.due_wall is None for e in plain.tick(0.01) if isinstance(e, eng.Publish))
+    # the same states as without the lookahead, only computed earlier
+    later = published(plain.tick(0.06))
+    assert [o.time_s for o in later] == pytest.approx([o.observation.time_s for o in states[1:]])
+    assert later[-1] == states[-1].observation
+    assert ahead.dropped_s() == 0.0
+
+
+def test_outbox_sends_each_batch_at_its_time_in_order_and_flush_sends_the_rest_now():
+    import time
+
+    from pulsejet_sim.engine.outbox import TimedOutbox
+    sent = []
+    box = TimedOutbox()
+    box.start()
+    t0 = time.monotonic()
+    for k in range(5):
+        box.put(t0 + 0.05 * (k + 1), [lambda k=k: sent.append((k, time.monotonic()))])
+    box.put(t0 + 60.0, [lambda: sent.append(('late', time.monotonic()))])
+    deadline = time.monotonic() + 30.0
+    while len(sent) < 5 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert [k for k, _ in sent] == [0, 1, 2, 3, 4]
+    assert all(when >= t0 + 0.05 * (k + 1) for k, when in sent)     # never early (late only under load)
+    assert box.pending() == 1
+    box.flush()
+    assert [k for k, _ in sent][-1] == 'late' and box.pending() == 0
+    box.close()

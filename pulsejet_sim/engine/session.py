@@ -50,9 +50,11 @@ OK, WARN, ERROR = 'OK', 'WARN', 'ERROR'
 # -- events ---------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Publish:
-    """Publish this observation (and the mantle profile); with ``ledger`` also the energy ledger."""
+    """Publish this observation (and the mantle profile); with ``ledger`` also the energy ledger.
+    ``due_wall``: with a lookahead, the wall time the state belongs to (publish it then, not now)."""
     observation: object
     ledger: bool = False
+    due_wall: Optional[float] = None
 
 
 @dataclass(frozen=True)
@@ -140,6 +142,10 @@ class SessionConfig:
     watchdog_action: str = 'safe'
     watchdog_clock: str = 'sim'
     control_period_s: float = 0.0      # closed_loop: 0 = one publication period
+    #: real_time: simulated seconds the physics runs ahead of publication, so a slow step (a hard
+    #: Newton solve) delays no state; each state is published at its own wall time (Publish.due_wall).
+    #: Commands then act up to this much later. 0 = publish each state as soon as it is computed.
+    lookahead_s: float = 0.0
     paused: bool = False
 
 
@@ -168,7 +174,11 @@ class Session:
     _last_hold_publish: float = -math.inf
     _last_drop_log: float = -math.inf
     _started_wall: float = 0.0
+    _deferring: bool = False
     events: list = field(default_factory=list)
+    #: commands since the start: accepted, rejected (a bad value or message; the node logs them
+    #: throttled, so these counts are the full record) and stale (closed-loop answers to old states)
+    command_counts: dict = field(default_factory=lambda: {'accepted': 0, 'rejected': 0, 'stale': 0})
 
     def __post_init__(self):
         import time
@@ -199,9 +209,13 @@ class Session:
         if self._pacer is not None:
             self.dropped_wall_s += self._pacer.dropped_s
         # the pacer counts publication periods, so that every state lies on the physics step's grid
-        max_periods = max(1, int(math.ceil(MAX_CATCH_UP_PERIODS * self.config.real_time_factor)))
+        max_periods = (max(1, int(math.ceil(MAX_CATCH_UP_PERIODS * self.config.real_time_factor)))
+                       + self._lookahead_periods())
         self._pacer = Pacer(self.dt_s * self.publish_every, self.config.real_time_factor, max_periods, now)
         self._window.free_running = False
+
+    def _lookahead_periods(self) -> int:
+        return int(math.ceil(self.config.lookahead_s / (self.dt_s * self.publish_every) - 1e-9))
 
     def dropped_s(self) -> float:
         """Wall seconds of real_time pacing that were not simulated (the physics or the machine
@@ -244,14 +258,18 @@ class Session:
             self._window.free_running = False
             return self._take()
         dropped = self._pacer.dropped_s
-        due = self._pacer.steps_due(now)
+        due = self._pacer.steps_due(now + self.config.lookahead_s / self.config.real_time_factor)
         if self._pacer.dropped_s > dropped and now - self._last_drop_log >= DROP_LOG_PERIOD_S:
             self._last_drop_log = now
             self._emit(Log('warning', f'fell behind real time (factor {self.config.real_time_factor:g}): '
                                       f'{self.dropped_s():.3f} s of wall time dropped so far, not caught up; '
                                       f'the physics alone runs at {self.physics_cost_rtf():.3g}x real time'))
         if due > 0:
-            self._run_periods(due)
+            self._deferring = self.config.lookahead_s > 0
+            try:
+                self._run_periods(due)
+            finally:
+                self._deferring = False
         self._check_duration()
         return self._take()
 
@@ -308,7 +326,11 @@ class Session:
             ledger = self.publications % self.ledger_every == 0
             if ledger:
                 self._publish_applied(self.command)
-            self._emit(Publish(obs, ledger=ledger))
+            due_wall = None
+            if self._deferring:   # the wall time of the period being completed (the pacer's grid)
+                pacer = self._pacer
+                due_wall = pacer.t0 + (pacer.steps_done + 1) * pacer.dt_s / pacer.rtf
+            self._emit(Publish(obs, ledger=ledger, due_wall=due_wall))
         self._check_duration()
         return True
 
@@ -351,16 +373,22 @@ class Session:
         stale = (self.config.pacing == 'closed_loop' and stamp_s is not None
                  and stamp_s < self.sim.time_s - 0.5 * self.dt_s)
         checked = {}
-        for name, value in values.items():
-            if name not in Command.LIMITS:
-                raise CommandError(f'{source}: {name!r} is not a command field; allowed: '
-                                   f'{", ".join(Command.LIMITS)}')
-            low, high = Command.LIMITS[name]
-            checked[name] = check_command_value(name, value, low, high)
+        try:
+            for name, value in values.items():
+                if name not in Command.LIMITS:
+                    raise CommandError(f'{source}: {name!r} is not a command field; allowed: '
+                                       f'{", ".join(Command.LIMITS)}')
+                low, high = Command.LIMITS[name]
+                checked[name] = check_command_value(name, value, low, high)
+        except CommandError:
+            self.command_counts['rejected'] += 1
+            raise
         if stale:
             # an answer to an earlier state (a repeated publication answered twice): applying it
             # would make the closed loop depend on delivery timing
+            self.command_counts['stale'] += 1
             return self._take()
+        self.command_counts['accepted'] += 1
         self.command = dataclasses.replace(self.command, **checked)
         self._last_command_steps = self.sim.steps
         self._last_command_wall = now
@@ -524,6 +552,7 @@ class Session:
             'energy_closure_relative': closure, 'energy_closure_j': closure_j,
             'command_age_s': age,
             'command_age_wall_s': now - self._last_command_wall,
+            **{f'commands_{k}': n for k, n in self.command_counts.items()},
             'watchdog': ('off' if cfg.watchdog_timeout_s <= 0 else
                          f'tripped ({cfg.watchdog_action})' if self.watchdog_tripped else 'armed'),
             'watchdog_clock': cfg.watchdog_clock,

@@ -128,7 +128,7 @@ RK4_STABLE_REAL = 2.785   # RK4 stability limit on the negative real axis
 MAX_SUBSTEPS = 4096
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, nogil=True, inline='always')
 def added_mass(flags, b, p):
     """Axial added mass m_x(b) and dm_x/db of the prolate spheroid (kg, kg/m)."""
     rho = p[P_RHO]
@@ -150,7 +150,7 @@ def added_mass(flags, b, p):
     return k1 * vol_coef * b * b, vol_coef * (dk1_db * b * b + 2.0 * k1 * b)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, nogil=True, inline='always')
 def fluid_stiffness_force(b, u, p):
     """The paper's fluid stiffness (section 3.5, eqs. 9-10; eq. 10 lost): U_max/U = 1 + b/2a,
     Cp = 1 - (U_max/U)^2, dCp = -2 Cp (the internal coefficient Cp' not given: 0), integral force
@@ -166,7 +166,7 @@ def fluid_stiffness_force(b, u, p):
     return force, k_x
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rhs(flags, y, valve, q_cmd, p, dy, diag):
     """Time derivatives of y at fixed valve opening and pump command; fills diag.
 
@@ -350,7 +350,7 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     diag[D_SPRING_RATE] = math.sqrt(abs(spring) / m_b_total) if m_b_total > 0.0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag):
     """One classical RK4 step of size h; k1 must already hold rhs at y (the caller evaluated it)."""
     n = N_INTEGRATED
@@ -368,7 +368,7 @@ def _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag):
         y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _check(y, p):
     for i in range(NY):
         if not math.isfinite(y[i]):
@@ -382,7 +382,7 @@ def _check(y, p):
     return OK
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def stored_energy(flags, y, p):
     """Mechanical energy held by the system, J: (elastic, vehicle, outer fluid, internal)."""
     rho = p[P_RHO]
@@ -409,7 +409,7 @@ def stored_energy(flags, y, p):
     return elastic, 0.5 * m_vehicle * u * u, 0.5 * m_x * u * u, internal
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
     """Advance y by n_steps fixed steps of dt. Returns (steps done, status); on a bad state y is
     restored to the last good step."""
@@ -464,13 +464,13 @@ def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
     return n_steps, OK
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
     """Entry point: specialise on the term set (see module docstring)."""
     return _advance(literally(flags), y, p, q_cmd, valve_cmd, n_steps, dt)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _evaluate(flags, y, p, q_cmd, diag):
     dy = np.empty(NY)
     rhs(flags, y, y[Y_VALVE], q_cmd, p, dy, diag)
@@ -478,7 +478,7 @@ def _evaluate(flags, y, p, q_cmd, diag):
     return e[0], e[1], e[2], e[3]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def evaluate(flags, y, p, q_cmd, diag):
     """Fill diag at the state y and return the stored energies (see stored_energy)."""
     return _evaluate(literally(flags), y, p, q_cmd, diag)
@@ -555,7 +555,7 @@ S_T_DONE = 3       # time reached (s, from the call's start); < duration only on
 NSTATS = 4
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _seal(flags, y, p):
     """The valve seals a moving flow: the water in the nozzle stops and the shell follows the pump;
     the kinetic energy this removes is booked as valve loss (as in the fixed-step path)."""
@@ -566,7 +566,7 @@ def _seal(flags, y, p):
     y[Y_E_VALVE] += (e_before[3] - e_after[3])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _err_norm(y0, y1, e, h, rtol, atol):
     """RMS of the local error estimate h*sum(E_i k_i) scaled by atol + rtol*max(|y0|, |y1|)."""
     s = 0.0
@@ -577,7 +577,7 @@ def _err_norm(y0, y1, e, h, rtol, atol):
     return math.sqrt(s / N_INTEGRATED)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _initial_step(flags, y, f0, valve, q_cmd, p, rtol, atol, span, tmp, f1, diag):
     """Hairer, Norsett & Wanner's starting step (II.4): h0 from |y|/|f|, refined by one Euler probe."""
     d0 = 0.0
@@ -605,13 +605,13 @@ def _initial_step(flags, y, f0, valve, q_cmd, p, rtol, atol, span, tmp, f1, diag
     return min(100.0 * h0, h1, span)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, nogil=True, inline='always')
 def _valve_at(v0, v_rate, dt):
     v = v0 + v_rate * dt
     return min(max(v, 0.0), 1.0)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _segment(flags, y, p, q_cmd, v0, v_rate, t0, t1, snap, rtol, atol, mem, t_out, out, n_out_done, stats, ks,
              tmp, y_old, diag):
     """Integrate y from t0 to t1 with the valve at v0 + v_rate (t - t0) (a smooth segment); outputs
@@ -729,7 +729,7 @@ def _segment(flags, y, p, q_cmd, v0, v_rate, t0, t1, snap, rtol, atol, mem, t_ou
     return OK, j, t
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats):
     """Advance y (NY components) by `duration` seconds holding the command, adaptively; mem (NMEM)
     carries the controller between calls. Writes the state at each t_out[j] in (0, duration]
@@ -787,7 +787,7 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
     return OK, n_written
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats):
     """Entry point: specialise on the term set (see module docstring)."""
     return _adaptive_advance(literally(flags), y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out,
