@@ -2,15 +2,19 @@
 
 Uses colcon-core + colcon-ros from the venv (no system ROS). The repository is copied into
 <tmp>/src/pulsejet_sim (without .venv, build, install, log, runs, .git) so the build leaves the
-working tree untouched.
+working tree untouched.  The build also warms numba's compile cache for the installed kernels
+(setup.py, pulsejet_sim/warmup.py): the installed node must load every kernel from that cache and
+compile nothing (checked from numba's NUMBA_DEBUG_CACHE output, not from wall-clock time).
 """
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -39,6 +43,10 @@ def ros_env(offset: int) -> dict:
     env.pop('PYTHONPATH', None)
     env.pop('AMENT_PREFIX_PATH', None)
     env.pop('COLCON_PREFIX_PATH', None)
+    # numba's cache goes next to the installed kernels (not to a developer's NUMBA_CACHE_DIR)
+    env.pop('NUMBA_CACHE_DIR', None)
+    env.pop('NUMBA_DISABLE_JIT', None)
+    env.pop('PULSEJET_SKIP_NUMBA_WARMUP', None)
     return env
 
 
@@ -47,13 +55,15 @@ def workspace(tmp_path_factory):
     ws = tmp_path_factory.mktemp('colcon_ws')
     shutil.copytree(REPO, ws / 'src' / PACKAGE, ignore=shutil.ignore_patterns(*EXCLUDE), symlinks=False)
     env = ros_env(71)
+    # the build compiles the shipped scenes' kernels (~30 s of one core; more on a loaded machine)
     proc = subprocess.run(colcon_command() + ['build', '--event-handlers', 'console_direct+'],
-                          cwd=ws, env=env, capture_output=True, text=True, timeout=300)
+                          cwd=ws, env=env, capture_output=True, text=True, timeout=840)
     assert proc.returncode == 0, f'colcon build failed ({proc.returncode}):\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}'
+    (ws / 'build_output.log').write_text(proc.stdout + proc.stderr)
     return ws
 
 
-@pytest.mark.timeout(300)
+@pytest.mark.timeout(900)
 def test_colcon_identifies_ament_python_package(workspace):
     log = (workspace / 'log' / 'latest_build' / 'logger_all.log').read_text()
     assert f"with type 'ros.ament_python' and name '{PACKAGE}'" in log, \
@@ -62,7 +72,7 @@ def test_colcon_identifies_ament_python_package(workspace):
     assert "build type 'ament_python'" in log
 
 
-@pytest.mark.timeout(300)
+@pytest.mark.timeout(900)
 def test_installed_layout(workspace):
     prefix = workspace / 'install' / PACKAGE
     for exe in ('sim_node', 'controller_node', 'recorder'):
@@ -82,7 +92,7 @@ def sourced(workspace: Path, command: str) -> list[str]:
     return ['sh', '-c', f'. "{workspace}/install/setup.sh" && {command}']
 
 
-@pytest.mark.timeout(300)
+@pytest.mark.timeout(900)
 def test_installed_sim_node_runs(workspace):
     env = ros_env(71)
     prefix = workspace / 'install' / PACKAGE
@@ -105,3 +115,77 @@ def test_installed_sim_node_runs(workspace):
             proc.wait()
     assert proc.returncode == 0, f'installed sim_node exited with {proc.returncode}:\n{out[-4000:]}'
     assert 'duration 0.5 s of simulated time reached' in out, out[-4000:]
+
+
+def site_packages(workspace: Path) -> Path:
+    site = list((workspace / 'install' / PACKAGE / 'lib').glob('python3*/site-packages'))
+    assert site, 'no site-packages in the install prefix'
+    return site[0]
+
+
+@pytest.mark.timeout(900)
+def test_build_warms_numba_cache_of_installed_kernels(workspace):
+    out = (workspace / 'build_output.log').read_text()
+    assert re.search(r'pulsejet_sim: numba compile cache: (\d+)/\1 scenes warmed', out), \
+        'setup.py did not report a warmed numba cache:\n' + \
+        '\n'.join(line for line in out.splitlines() if 'numba' in line or 'warm' in line)
+    cache = site_packages(workspace) / PACKAGE / 'models' / '__pycache__'
+    for module in ('lumped_kernels', 'shell_kernels'):
+        index = list(cache.glob(f'{module}.advance-*.nbi'))
+        data = list(cache.glob(f'{module}.advance-*.nbc'))
+        assert index and data, f'no numba cache of {module}.advance in {cache}: ' + \
+            ', '.join(sorted(p.name for p in cache.glob('*.nb?')))
+    # recorded as installed files, so colcon removes them with the rest (switch to --symlink-install)
+    record = (workspace / 'build' / PACKAGE / 'install.log').read_text().splitlines()
+    assert any(line.endswith('.nbi') and 'shell_kernels.advance' in line for line in record), \
+        'the numba cache files are not in the install record'
+
+
+@pytest.mark.timeout(900)
+@pytest.mark.parametrize('scene', ['pump_cycle', 'shell_robot'])
+def test_installed_sim_node_first_state_from_warm_cache(workspace, scene):
+    """The installed sim_node publishes its first state having loaded every kernel from the cache
+    written at build time: NUMBA_DEBUG_CACHE shows data loaded from the installed tree and nothing saved."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    env = ros_env(71)
+    env['NUMBA_DEBUG_CACHE'] = '1'
+    domain = int(env['ROS_DOMAIN_ID'])
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node('first_state_probe', context=context)
+    received = []
+    node.create_subscription(Clock, '/clock', received.append,
+                             QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    exe = workspace / 'install' / PACKAGE / 'lib' / PACKAGE / 'sim_node'
+    proc = subprocess.Popen(sourced(workspace, f'exec "{exe}" --ros-args -p scene:={scene}'),
+                            env=env, cwd=workspace, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        end = time.monotonic() + 240
+        while not received and proc.poll() is None and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGINT)
+        try:
+            out, _ = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            out, _ = proc.communicate()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert received, f'no state on /clock from the installed sim_node (scene {scene}):\n{out[-4000:]}'
+    site = str(site_packages(workspace) / PACKAGE / 'models' / '__pycache__')
+    module = 'lumped_kernels' if scene == 'pump_cycle' else 'shell_kernels'
+    loaded = [line for line in out.splitlines() if line.startswith('[cache] data loaded from') and site in line]
+    assert any(f'{module}.advance' in line for line in loaded), \
+        f'sim_node did not load {module}.advance from the installed cache {site}:\n{out[-4000:]}'
+    saved = [line for line in out.splitlines() if line.startswith('[cache] data saved')]
+    assert not saved, 'sim_node compiled kernels the build did not warm:\n' + '\n'.join(saved)
