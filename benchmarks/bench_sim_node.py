@@ -29,18 +29,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from pulsejet_sim.node_params import ros_value  # noqa: E402
+from live_common import cpu_seconds  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'sim_node.md'
-
-
-def cpu_seconds(pid: int) -> float:
-    """user + system CPU seconds of a process (Linux /proc)."""
-    try:
-        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-    except (OSError, IndexError, ValueError):
-        return float('nan')
 
 
 def stop(proc: subprocess.Popen, timeout=10.0) -> int:
@@ -54,7 +46,8 @@ def stop(proc: subprocess.Popen, timeout=10.0) -> int:
     return proc.returncode
 
 
-def run(seconds: float, rtf: float, publish_rate_hz: float, scene: str, controller: bool) -> dict:
+def run(seconds: float, rtf: float, publish_rate_hz: float, scene: str, controller: bool,
+        lookahead_s: float = 0.0) -> dict:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -70,7 +63,7 @@ def run(seconds: float, rtf: float, publish_rate_hz: float, scene: str, controll
     domain = int(env['ROS_DOMAIN_ID'])
     sim_cmd = [sys.executable, '-m', 'pulsejet_sim.sim_node', '--ros-args',
                '-p', f'scene:={scene}', '-p', f'real_time_factor:={ros_value(rtf)}',
-               '-p', f'publish_rate_hz:={ros_value(nominal_rate)}']
+               '-p', f'publish_rate_hz:={ros_value(nominal_rate)}', '-p', f'lookahead_s:={ros_value(lookahead_s)}']
     procs = []
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
@@ -131,7 +124,7 @@ def run(seconds: float, rtf: float, publish_rate_hz: float, scene: str, controll
         'rtf_held': float((s[-1] - s[0]) / (t[-1] - t[0])),
         'sim_step_per_msg_ms': float(np.median(sim_steps) * 1e3),
         'cpu_percent': float(100 * (cpu1 - cpu0) / (wall1 - wall0)),
-        'controller': controller,
+        'controller': controller, 'lookahead_s': lookahead_s,
     }
 
 
@@ -140,6 +133,7 @@ def table(r: dict) -> str:
         ('scene', r['scene'] + (' (+ controller_node)' if r['controller'] else '')),
         ('wall time measured', f"{r['seconds']:.1f} s"),
         ('real-time factor requested', f"{r['rtf_requested']:g}"),
+        ('sim_node lookahead_s', f"{r['lookahead_s']:g} s"),
         ('real-time factor held (sim s / wall s)', f"{r['rtf_held']:.4f}"),
         ('publication rate nominal', f"{r['nominal_rate_hz']:g} Hz"),
         ('publication rate achieved (/clock)', f"{r['rate_hz']:.2f} Hz ({r['messages']} messages)"),
@@ -160,9 +154,10 @@ def main(argv=None) -> int:
     ap.add_argument('--publish-rate', type=float, default=0.0, help='Hz; 0 = the scene value')
     ap.add_argument('--scene', default='pump_cycle')
     ap.add_argument('--controller', action='store_true', help='also run controller_node (pump/valve cycling)')
+    ap.add_argument('--lookahead', type=float, default=0.0, help="sim_node's lookahead_s (s of simulated time)")
     ap.add_argument('--no-write', action='store_true', help=f'do not append to {RESULTS}')
     args = ap.parse_args(argv)
-    r = run(args.seconds, args.real_time_factor, args.publish_rate, args.scene, args.controller)
+    r = run(args.seconds, args.real_time_factor, args.publish_rate, args.scene, args.controller, args.lookahead)
     now = _dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
     header = (f'## sim_node benchmark, {now}\n\n'
               f'machine: {os.cpu_count()} CPUs (nproc {len(os.sched_getaffinity(0))}), {platform.machine()}, '

@@ -1,12 +1,17 @@
-"""ROS 2 node around a routine of `pulsejet_ctrl.routines`: reads simulation time from /clock,
-publishes pump/valve/cable commands.
+"""ROS 2 node around a routine of `pulsejet_ctrl.routines`: follows the node's ROS clock (simulation
+time from /clock through rclpy's time source, `use_sim_time`), publishes pump/valve/cable commands.
 
 A thin adapter: the state machine lives in `pulsejet_ctrl.routines` (PumpValveRoutine, or
 CableRoutine for a shell scene whose cable follows a routine: the scene is loaded command-driven,
-so the simulator takes the cable force from here). The routine is evaluated at `rate_hz` in
-*simulation* time (on /clock messages), so the command sequence does not depend on the
-simulator's real-time factor beyond the clock's own resolution; when the time goes back (a
-simulator reset) the routine restarts.
+so the simulator takes the cable force from here). The routine is evaluated by a timer at
+`rate_hz` on the node's clock (`self.get_clock()`): with `use_sim_time` (the default here) that is
+*simulation* time, so the command sequence does not depend on the simulator's real-time factor
+beyond the clock's own resolution, and pause, lockstep steps and resets drive it. When the time
+goes back (a simulator reset, a restarted simulator, a looping replay: a clock jump callback) the
+routine restarts and answers the new time at once. ROS time 0 means the simulation has not started
+(or was reset and is held there): a /clock at 0 moves no clock, so while the clock reads 0 the
+routine's command for t = 0 is re-sent every STANDBY_PERIOD_S of wall time and the simulator starts
+with it. With `-p use_sim_time:=false` the routine runs in wall time from the node's start.
 
 Parameters
   scene             (string, read-only)  scene whose `routine:` block gives the kind and defaults; default shell_robot
@@ -18,11 +23,15 @@ Parameters
                                          cable: amplitude_n, frequency_hz, contraction_s, release_s,
                                          start_delay_s. Default from the scene, each overridable at
                                          start-up; ranges from the routine's spec (`ros2 param describe`)
+  use_sim_time      (bool)               rclpy's own: follow /clock; default TRUE for this node (it is
+                                         driven by sim_node; false with closed_loop, which runs on the
+                                         state stamps); `-p use_sim_time:=false` = wall time
 Every parameter has a descriptor (description, range); values are checked at declaration and on
 live changes, a rejection names the value and the allowed range.
-Subscribes /clock (rosgraph_msgs/Clock, best effort: a reliable or best-effort clock such as a bag
-player's), pulsejet/volume (std_msgs/Float64, m^3), and with closed_loop pulsejet/velocity
-(geometry_msgs/TwistStamped: each state's stamp).
+Subscribes /clock through rclpy's TimeSource (rosgraph_msgs/Clock, best effort depth 1: a reliable
+or best-effort clock such as a bag player's), pulsejet/volume (std_msgs/Float64, m^3), and with
+closed_loop pulsejet/velocity (geometry_msgs/TwistStamped: each state's stamp; in closed loop the
+state stamps, not the clock, drive the routine).
 Publishes pulsejet/cmd/pump_flow (m^3/s), pulsejet/cmd/valve (0..1), pulsejet/cmd/cable_force (N);
 with closed_loop instead pulsejet/cmd/command (sensor_msgs/JointState, all actuators at once).
 """
@@ -32,9 +41,12 @@ import math
 import sys
 
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockChange, JumpThreshold
+from rclpy.clock_type import ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from pulsejet_ctrl import routines as _routines
@@ -60,6 +72,9 @@ ROUTINE_FIELDS = {
 INTEGER_FIELDS = ('cycles',)
 #: routine kind -> field -> pulsejet_sim.schema.Number (default, range)
 ROUTINE_SPECS = {'pump_valve': _routines.PUMP_VALVE_SPEC, 'cable': _routines.CABLE_SPEC}
+#: wall seconds between re-sends of the t = 0 command while the ROS clock reads 0 (not started)
+STANDBY_PERIOD_S = 0.2
+USE_SIM_TIME = 'use_sim_time'
 
 
 class ControllerNode(Node):
@@ -79,6 +94,15 @@ class ControllerNode(Node):
         self.closed_loop = bool(self._declare(ParamSpec(
             'closed_loop', False, 'answer every state with one atomic command stamped at its time '
             '(for sim_node pacing closed_loop)', read_only=True)))
+        # use_sim_time defaults to true here, except with closed_loop (the state stamps drive the
+        # routine there: no /clock subscription, as before). rclpy's TimeSource declared it (default
+        # false) in Node.__init__; constructor parameter_overrides would beat the command line, so
+        # the default is applied only when neither the command line, a params file nor the caller's
+        # parameter_overrides gave a value (-p use_sim_time:=false still means wall time).
+        if USE_SIM_TIME not in self._parameter_overrides and not self.closed_loop:
+            result = self.set_parameters([Parameter(USE_SIM_TIME, Parameter.Type.BOOL, True)])[0]
+            if not result.successful:
+                raise ValueError(f'parameter {USE_SIM_TIME}=True rejected: {result.reason}')
         # command_driven: a shell scene's built-in cable routine becomes commands sent from here
         scene = load_scene(self.get_parameter('scene').value, command_driven=True)
         scene_routine = dict(getattr(scene, 'routine', None) or {})
@@ -119,19 +143,31 @@ class ControllerNode(Node):
                 self._pubs[topic] = self.create_publisher(Float64, topic, qos)
         self.volume_m3 = None
         self.last_time_s = None
-        self.next_command_s = None
         self.commands_sent = 0
         self._answer = None   # (state time, command) of the last closed-loop answer
         self._volume_fresh = False   # a volume arrived since the last answer
         self._pending = None         # a state's time waiting for its volume
         best_effort = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self._timer = None
+        clock = self.get_clock()
+        # routine time = clock time - origin: 0 for ROS (simulation) time, the start for wall time
+        self._origin_ns = 0 if clock.ros_time_is_active else clock.now().nanoseconds
         if self.closed_loop:
             self.create_subscription(messages.message_class(messages.TOPIC_VELOCITY), messages.TOPIC_VELOCITY,
                                      self._on_state, best_effort)
         else:
-            self.create_subscription(Clock, messages.TOPIC_CLOCK, self._on_clock, best_effort)
+            # on the node's clock: fires when /clock (through the TimeSource) passes each period;
+            # created while the clock reads 0, so its grid is k / rate_hz of simulated time
+            self._timer = self.create_timer(self.period_s, self._on_timer)
+            # backwards jumps (reset, restarted simulator, looping replay) and use_sim_time switches
+            self._jump_handle = clock.create_jump_callback(
+                JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=True),
+                post_callback=self._on_time_jump)
+            self.create_timer(STANDBY_PERIOD_S, self._on_standby, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_subscription(Float64, messages.TOPIC_VOLUME, self._on_volume, best_effort)
-        self.get_logger().info(f'routine {config} at {self.rate_hz:g} Hz of simulated time; waiting for /clock')
+        timing = ('simulated time (use_sim_time: /clock); waiting for /clock' if clock.ros_time_is_active
+                  else 'wall time from now (use_sim_time false)')
+        self.get_logger().info(f'routine {config} at {self.rate_hz:g} Hz of {timing}')
 
     def _declare(self, spec: ParamSpec):
         self._specs[spec.name] = spec
@@ -145,8 +181,10 @@ class ControllerNode(Node):
         if self._ready and 'rate_hz' in checked:
             self.rate_hz = checked['rate_hz']
             self.period_s = 1.0 / self.rate_hz
-            self.next_command_s = None     # next /clock sample sends and restarts the grid
-            self.get_logger().info(f'command rate set to {self.rate_hz:g} Hz of simulated time')
+            if self._timer is not None:    # the new period from now on (not after the old one)
+                self._timer.timer_period_ns = int(self.period_s * 1e9)
+                self._timer.reset()
+            self.get_logger().info(f'command rate set to {self.rate_hz:g} Hz of the node clock')
         return SetParametersResult(successful=True)
 
     def _on_volume(self, msg: Float64):
@@ -178,25 +216,46 @@ class ControllerNode(Node):
         self.commands_sent += 1
 
     def _follow_time(self, t):
-        """Restart the routine when simulation time goes back (a simulator reset)."""
+        """Restart the routine when the time goes back (a simulator reset)."""
         if self.last_time_s is None:
             self.get_logger().info(f'first state at t={t:.3f} s')
         elif t < self.last_time_s - 1e-9:
             self.get_logger().warning(f'simulation time went back from {self.last_time_s:.3f} s to {t:.3f} s; '
                                       'restarting the routine')
             self.routine = self._routine_cls.from_config(dict(self.config))
-            self.next_command_s = None
         self.last_time_s = t
 
-    def _on_clock(self, msg: Clock):
-        t = msg.clock.sec + msg.clock.nanosec * 1e-9
-        self._follow_time(t)
-        if self.next_command_s is not None and t < self.next_command_s - 1e-9:
-            return
+    def _routine_time(self) -> float:
+        return (self.get_clock().now().nanoseconds - self._origin_ns) * 1e-9
+
+    def _on_timer(self):
+        """One command per period of the node clock (a jump over several periods sends one)."""
+        t = self._routine_time()
+        self._follow_time(t)     # also catches a wall clock stepped back (no jump callback for that)
         self._send(t)
-        # next command one period later, on the period grid (no drift)
-        k = math.floor(t / self.period_s + 1e-9) + 1
-        self.next_command_s = k * self.period_s
+
+    def _on_time_jump(self, jump):
+        """Post-jump callback of the node clock (runs where /clock is taken, in the executor)."""
+        clock = self.get_clock()
+        if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED, ClockChange.ROS_TIME_DEACTIVATED):
+            # use_sim_time switched live: a new time base, the routine starts over on it
+            self._origin_ns = 0 if clock.ros_time_is_active else clock.now().nanoseconds
+            self.routine = self._routine_cls.from_config(dict(self.config))
+            self.last_time_s = None
+            self.get_logger().info(f'use_sim_time now {clock.ros_time_is_active}: restarting the routine')
+            self._timer.reset()
+            return
+        t = self._routine_time()
+        self._follow_time(t)          # restarts the routine
+        self._timer.reset()           # next command one period after the new time
+        self._send(t)                 # and the new time is answered at once
+
+    def _on_standby(self):
+        """While the ROS clock reads 0 (no /clock yet, or a simulator held at its start) re-send
+        the command for t = 0: a /clock at 0 moves no clock, so no timer or jump would answer it."""
+        clock = self.get_clock()
+        if clock.ros_time_is_active and clock.now().nanoseconds == 0:
+            self._send(0.0)
 
     def _send(self, t):
         cmd = self.routine.command(t, self.volume_m3)

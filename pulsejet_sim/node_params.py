@@ -1,8 +1,12 @@
 """Node parameters and command lines: one table entry per parameter (default, description, range,
 read-only), the check that a live change must pass, and the `--ros-args` form of a value.
 
-Shared by sim_node and controller_node (declaration and on-set validation) and by everything that
-starts a node as a process (the demo, the harness, tests, benchmarks).
+Shared by sim_node, controller_node, recorder and replay (declaration and on-set validation) and by
+everything that starts a node as a process (the demo, the harness, tests, benchmarks).
+
+Structured scene overrides: sim_node takes every parameter named `scene.<section>.<key>` (from
+`-p scene.geometry.nozzle_radius_m:=0.01` or a params file, where a nested `scene:` mapping is
+flattened by rcl to the same names) as an override of that scene key (`scene_overrides` below).
 """
 from __future__ import annotations
 
@@ -25,12 +29,15 @@ class ParamSpec:
     choices: tuple[str, ...] | None = None
     read_only: bool = False
     allowed: str | None = None   # wording of the allowed values when the range alone is not enough
+    dynamic: bool = False        # any type accepted by rclpy: the node checks the value itself
 
     def allowed_text(self) -> str:
         if self.allowed:
             return self.allowed
         if self.choices:
             return 'one of ' + ', '.join(self.choices)
+        if isinstance(self.default, (list, tuple)):
+            return 'a list of strings'
         if self.low is not None:
             kind = 'a whole number' if isinstance(self.default, int) and not isinstance(self.default, bool) \
                 else 'a number'
@@ -53,10 +60,16 @@ class ParamSpec:
             d.dynamic_typing = True
             d.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high),
                                                          step=0.0)]
+        elif isinstance(self.default, (list, tuple)):
+            d.type = ParameterType.PARAMETER_STRING_ARRAY
         else:
             d.type = ParameterType.PARAMETER_STRING
             if self.choices:
                 d.additional_constraints = 'one of: ' + ', '.join(self.choices)
+        if self.dynamic:
+            d.type = ParameterType.PARAMETER_NOT_SET
+            d.dynamic_typing = True
+            d.additional_constraints = d.additional_constraints or self.allowed_text()
         return d
 
     def check(self, value):
@@ -67,6 +80,8 @@ class ParamSpec:
             ok = isinstance(value, int) and not isinstance(value, bool) and self.low <= value <= self.high
         elif isinstance(self.default, float):
             return check_number(self.name, value, self.low, self.high, self.allowed_text())
+        elif isinstance(self.default, (list, tuple)):
+            ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
         else:
             ok = isinstance(value, str) and (self.choices is None or value in self.choices)
         if not ok:
@@ -98,6 +113,50 @@ def check_parameters(params, specs) -> tuple[dict, SetParametersResult | None]:
         except ValueError as exc:
             return checked, SetParametersResult(successful=False, reason=str(exc))
     return checked, None
+
+
+SCENE_PREFIX = 'scene.'
+
+
+def scene_override_names(overrides) -> list[str]:
+    """The `scene.<key>` names among a node's parameter overrides (rclpy's `_parameter_overrides`:
+    command line, params files and constructor overrides), sorted."""
+    return sorted(name for name in overrides if name.startswith(SCENE_PREFIX))
+
+
+def scene_override_descriptor(name: str) -> ParameterDescriptor:
+    key = name[len(SCENE_PREFIX):]
+    return ParameterDescriptor(
+        description=f'scene override: the value of scene key {key} (merged over the scene file and '
+                    'scene_overrides); allowed: what the scene schema allows for that key',
+        read_only=True, dynamic_typing=True)
+
+
+def scene_overrides(values: dict) -> dict:
+    """{'scene.geometry.nozzle_radius_m': 0.01, ...} -> {'geometry': {'nozzle_radius_m': 0.01}}: the
+    nested mapping merged into the scene (the scene's own validation then refuses an unknown key
+    or a bad value, naming it). ValueError for a name with an empty part or a key given both as a
+    value and as a section."""
+    out: dict = {}
+    origin: dict = {}     # key path -> parameter that set it (for a conflict message)
+    for name in sorted(values):
+        parts = name[len(SCENE_PREFIX):].split('.')
+        if not name.startswith(SCENE_PREFIX) or not all(parts):
+            raise ValueError(f'parameter {name!r} rejected; allowed: scene.<section>.<key>, e.g. '
+                             'scene.geometry.nozzle_radius_m')
+        value = values[name]
+        if not isinstance(value, (bool, int, float, str)):   # an rclpy array: a plain list
+            value = list(value)
+        node = out
+        for i, part in enumerate(parts[:-1]):
+            path = tuple(parts[:i + 1])
+            if path in origin:
+                raise ValueError(f'parameter {name}={value!r} conflicts with {origin[path]}: '
+                                 f'{".".join(path)} cannot be both a value and a section')
+            node = node.setdefault(part, {})
+        node[parts[-1]] = value   # sorted: a key's own value comes before its sub-keys
+        origin[tuple(parts)] = name
+    return out
 
 
 def ros_value(value) -> str:

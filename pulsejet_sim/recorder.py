@@ -5,10 +5,11 @@ clock, ns), like `ros2 bag record`; analysis uses the simulation-time header sta
 
     ros2 run pulsejet_sim recorder --ros-args -p output:=runs/x.mcap -p topics:="['pulsejet/velocity']"
 
-Parameters: `output` (path; default runs/<UTC date-time>.mcap), `topics` (string array; default
-every pulsejet topic incl. commands, the energy ledger and /clock; an entry may be `name:pkg/msg/Type`
-for a topic outside the pulsejet set). On SIGINT/SIGTERM the file is closed complete and its path
-printed. `Recorder(node, path, topics)` does the same inside another process's node.
+Parameters (read-only, with descriptors: `ros2 param describe /recorder output`): `output` (path;
+default runs/<UTC date-time>.mcap), `topics` (string array; default every pulsejet topic incl.
+commands, the energy ledger and /clock; an entry may be `name:pkg/msg/Type` for a topic outside the
+pulsejet set). On SIGINT/SIGTERM the file is closed complete and its path printed.
+`Recorder(node, path, topics)` does the same inside another process's node.
 """
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from pulsejet_sim import messages
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.writer import BagError, BagWriter, qos_profiles_yaml
+from pulsejet_sim.node_params import ParamSpec
 
 # State and command topics: reliable and deep, so a burst from a fast simulation is not dropped.
 STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
@@ -34,6 +36,14 @@ STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
 CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                        reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
 FLUSH_PERIOD_S = 1.0   # an idle recorder still pushes its last chunk to disk within this time
+# read-only: the file and its topics are fixed at start-up
+PARAMETERS = (
+    ParamSpec('output', '', 'MCAP file to write (rosbag2 layout); empty = runs/<UTC date-time>.mcap',
+              read_only=True, allowed='a file path or empty'),
+    ParamSpec('topics', tuple(messages.TOPIC_TYPES), 'topics to record: pulsejet topic names, or '
+              '"name:pkg/msg/Type" for any other topic; default every pulsejet topic and /clock',
+              read_only=True, allowed='a list of topic names or "name:pkg/msg/Type" entries'),
+)
 
 
 def default_output(now: datetime.datetime | None = None) -> Path:
@@ -129,8 +139,11 @@ def main(args: list[str] | None = None) -> int:
 
     rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that make spin() return
     node = Node('recorder')
-    output = node.declare_parameter('output', '').value or str(default_output())
-    topics = list(node.declare_parameter('topics', list(messages.TOPIC_TYPES)).value or messages.TOPIC_TYPES)
+    values = {spec.name: node.declare_parameter(spec.name, list(spec.default) if isinstance(spec.default, tuple)
+                                                else spec.default, spec.descriptor()).value
+              for spec in PARAMETERS}
+    output = values['output'] or str(default_output())
+    topics = list(values['topics'] or messages.TOPIC_TYPES)
     try:
         recorder = Recorder(node, output, topics)
     except (ValueError, OSError) as exc:

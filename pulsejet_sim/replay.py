@@ -12,7 +12,7 @@ times for recorder files, so either plays back at its recorded pace.
     ros2 run pulsejet_sim replay --ros-args -p bag:=runs/x.mcap -p rate:=2.0
     python -m pulsejet_sim.replay --ros-args -p bag:=runs/x.mcap -p loop:=true
 
-Parameters
+Parameters (read-only, declared with descriptors: `ros2 param describe /replay rate`; see parameter_specs)
   bag             path of the MCAP recording (required)
   rate            playback speed factor, finite > 0 (default 1.0; 2.0 = twice as fast)
   loop            restart at the end until stopped (default false)
@@ -48,6 +48,7 @@ time keep their file order; a generated clock tick is published before messages 
 """
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import math
 import signal
@@ -68,6 +69,36 @@ MIN_PASS_S = 0.01         # a looping pass lasts at least this long (a one-insta
 MAX_CLOCK_TICKS = 10_000_000   # generated /clock ticks per pass (a damaged log time must not exhaust memory)
 PARAMETERS = ('bag', 'rate', 'loop', 'start_offset_s', 'topics', 'publish_clock', 'clock_rate_hz',
               'wait_for_topics', 'delay_s', 'replay_commands')
+TOPIC_LIST = 'a list of topic names, e.g. "[\'pulsejet/velocity\', \'/clock\']"'
+
+
+def parameter_specs() -> dict:
+    """Name -> pulsejet_sim.node_params.ParamSpec: the descriptors `ros2 param describe /replay` shows.
+    All read-only (the file is played as configured at start-up) and dynamically typed (rate:=2
+    and rate:=2.0 both work): check_config checks the values, before they are declared."""
+    from pulsejet_sim.node_params import ParamSpec
+    inf = math.inf
+    specs = (
+        ParamSpec('bag', '', 'path of the MCAP recording to play (required)', allowed='an MCAP file path'),
+        ParamSpec('rate', 1.0, 'playback speed factor (2.0 = twice as fast)', 0.0, inf,
+                  allowed='a finite number > 0'),
+        ParamSpec('loop', False, 'restart at the end until stopped (/clock jumps back at each pass)'),
+        ParamSpec('start_offset_s', 0.0, 'skip the first seconds of the recording', 0.0, inf,
+                  allowed='a finite number of seconds >= 0, below the recording\'s duration'),
+        ParamSpec('topics', None, 'replay only these topics (empty: all); /clock is governed by publish_clock',
+                  allowed=TOPIC_LIST + ' or empty'),
+        ParamSpec('publish_clock', True, 'drive /clock: the recorded one, else one generated from the log '
+                  'times at clock_rate_hz'),
+        ParamSpec('clock_rate_hz', 100.0, 'rate of the generated /clock in wall time (only without a '
+                  'recorded /clock)', 0.0, 10000.0, allowed='a finite rate in (0, 10000] Hz'),
+        ParamSpec('wait_for_topics', None, 'before playing, wait until each of these replayed topics has a '
+                  'subscription', allowed=TOPIC_LIST + ' or empty'),
+        ParamSpec('delay_s', 0.0, 'wall seconds to wait before playing (after wait_for_topics)', 0.0, inf,
+                  allowed='a finite number of seconds >= 0'),
+        ParamSpec('replay_commands', False, 'also replay the recorded pulsejet/cmd/* commands when topics is '
+                  'empty (a replay next to a live sim_node must not drive it)'),
+    )
+    return {spec.name: dataclasses.replace(spec, read_only=True, dynamic=True) for spec in specs}
 
 
 class ConfigError(ValueError):
@@ -392,18 +423,18 @@ class Player:
 
 
 def read_parameters(node: Any) -> dict[str, Any]:
-    """Declare the parameters (dynamic typing: rate:=2 and rate:=2.0 both work; check_config checks)."""
-    from rcl_interfaces.msg import ParameterDescriptor
-    dyn = ParameterDescriptor(dynamic_typing=True)
-    defaults = {'bag': '', 'rate': 1.0, 'loop': False, 'start_offset_s': 0.0, 'topics': None,
-                'publish_clock': True, 'clock_rate_hz': 100.0, 'wait_for_topics': None, 'delay_s': 0.0,
-                'replay_commands': False}
-    values = {name: node.declare_parameter(name, default, dyn).value for name, default in defaults.items()}
+    """The parameter values (overrides over defaults), checked by check_config (ConfigError names a
+    bad or unknown one), then declared with their descriptors (parameter_specs)."""
+    specs = parameter_specs()
     overrides = getattr(node, '_parameter_overrides', {}) or {}
+    values = {name: overrides[name].value if name in overrides else spec.default for name, spec in specs.items()}
     for name in overrides:   # a misspelt -p name:=value would otherwise be ignored silently
         if name not in values and name != 'use_sim_time':
             values[name] = overrides[name].value
-    return values
+    check_config(values)     # before declaring: the error is ours, naming the value, not rclpy's range text
+    for name, spec in specs.items():
+        node.declare_parameter(name, spec.default, spec.descriptor())
+    return {**values, **{name: node.get_parameter(name).value for name in specs}}
 
 
 def main(args: Sequence[str] | None = None) -> int:

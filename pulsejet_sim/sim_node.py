@@ -3,12 +3,17 @@ services and /diagnostics; the session paces the physics and says what to publis
 
 Parameters (see PARAMETERS for the ranges; `ros2 param describe /sim_node <name>` shows them)
   scene                  (string, read-only)  scene name under config/ or a YAML path; default shell_robot
-  scene_overrides        (string, read-only)  YAML mapping merged into the scene (prefer a params file)
+  scene_overrides        (string, read-only)  YAML mapping merged into the scene (kept for compatibility)
+  scene.<section>.<key>  (any, read-only)     one scene key each, merged over scene_overrides, e.g.
+                                              `-p scene.geometry.nozzle_radius_m:=0.01`, or a nested
+                                              `scene:` mapping in a params file (rcl flattens it)
   pacing                 (string, live)       real_time | as_fast_as_possible | lockstep | closed_loop
   real_time_factor       (double, live)       simulated s per wall s under real_time pacing
   publish_rate_hz        (double, read-only)  publication rate; 0 = scene value or 100. Every state lies on
                                               the physics step's grid, one publication period apart
   control_period_s       (double, read-only)  closed_loop: simulated s per control period (0 = one publication period)
+  lookahead_s            (double, read-only)  real_time: simulated s the physics runs ahead; each state is sent at
+                                              its own wall time, so slow steps do not jitter publication (default 0)
   duration_s             (double, read-only)  simulated time after which the node exits (0 = forever)
   wait_for_subscribers   (int, read-only)     hold the clock at 0 until `/clock` has this many subscribers
   wait_timeout_s         (double, read-only)  see wait_for_subscribers; default 10
@@ -23,8 +28,10 @@ Parameters (see PARAMETERS for the ranges; `ros2 param describe /sim_node <name>
 Topics, services and types: `pulsejet_sim.messages` (one place for every name). Commands arrive per
 actuator (std_msgs/Float64) or atomically on pulsejet/cmd/command (sensor_msgs/JointState, every
 named actuator at the same step); subscriptions are best effort, so reliable and best-effort
-publishers both connect. A non-finite or out-of-range value is rejected with a warning naming it;
-the held command is kept. Reset returns to the scene's initial state and command at time 0
+publishers both connect. A non-finite or out-of-range value is rejected with a warning naming it
+(throttled; /diagnostics counts every one); the held command is kept. Commands reach the pacing
+thread through an inbox, so the executor never waits for a physics batch; the kernels release the
+GIL while they step. Reset returns to the scene's initial state and command at time 0
 (/clock jumps back, like a Gazebo world reset). The diagnostic status is named after the node's
 fully qualified name, so two robots in one domain stay apart.
 Exit code: 0 on duration reached or SIGINT/SIGTERM, 1 when stopped after a blow-up, 2 on a bad scene
@@ -32,6 +39,8 @@ or parameter.
 """
 from __future__ import annotations
 
+import collections
+import functools
 import math
 import signal
 import sys
@@ -47,8 +56,10 @@ from std_srvs.srv import SetBool, Trigger
 
 from pulsejet_sim import messages
 from pulsejet_sim.engine import session as eng
+from pulsejet_sim.engine.outbox import TimedOutbox
 from pulsejet_sim.models.base import CommandError, SimulationBlowUp
-from pulsejet_sim.node_params import ParamSpec, check_parameters
+from pulsejet_sim.node_params import (ParamSpec, check_parameters, scene_override_descriptor, scene_override_names,
+                                     scene_overrides)
 from pulsejet_sim.scene import DEFAULT_SCENE
 
 DEFAULT_PUBLISH_RATE_HZ = 100.0
@@ -67,6 +78,9 @@ PARAMETERS = (
               0.0, 10000.0, read_only=True, allowed='0 (scene value) or a rate in [0, 10000] Hz'),
     ParamSpec('control_period_s', 0.0, 'closed_loop pacing: simulated seconds per control period '
               '(0 = one publication period)', 0.0, 60.0, read_only=True),
+    ParamSpec('lookahead_s', 0.0, 'real_time pacing: simulated seconds the physics runs ahead of publication, so '
+              'slow steps do not delay states (each is published at its wall time); commands act that much '
+              'later (0 = publish each state as soon as it is computed)', 0.0, 1.0, read_only=True),
     ParamSpec('duration_s', 0.0, 'simulated seconds after which the node exits (0 = run forever)',
               0.0, 1e9, read_only=True),
     ParamSpec('wait_for_subscribers', 0, 'hold the simulation at t=0 until /clock has this many subscribers',
@@ -90,6 +104,11 @@ PARAMETERS = (
 )
 PARAMETER_SPECS = {p.name: p for p in PARAMETERS}
 LIVE_CONFIG = ('pacing', 'real_time_factor', 'step_count', 'watchdog_timeout_s', 'watchdog_clock', 'watchdog_action')
+GIL_SWITCH_INTERVAL_S = 2e-4
+#: command-rejection warnings: a burst of this many, then this many per second; the rest are only
+#: counted (commands_rejected in /diagnostics) and summed up in the next warning
+REJECTION_LOG_BURST = 10
+REJECTION_LOG_RATE_HZ = 2.0
 
 
 class SimNode(Node):
@@ -105,7 +124,14 @@ class SimNode(Node):
         # share the session under this lock
         self._lock = threading.RLock()
         self._stop_pacing = threading.Event()
+        # commands go through this inbox instead of the lock: the executor never waits for a physics
+        # batch to hand one over (the pacing thread applies them, in arrival order, before it steps)
+        self._inbox = collections.deque()
+        self._wake = threading.Event()
+        self._outbox = TimedOutbox(name='sim_node publication')   # states computed ahead (lookahead_s)
+        self._outbox_due = None   # wall time of the last batch put there
         self._pacing_thread = None
+        self._warn_tokens, self._warn_refilled, self._warn_suppressed = float(REJECTION_LOG_BURST), 0.0, 0
         self._finished = False
         self.add_on_set_parameters_callback(self._on_set_parameters)
         for spec in PARAMETERS:
@@ -121,6 +147,16 @@ class SimNode(Node):
             if not isinstance(overrides, dict):
                 raise ValueError(f'parameter scene_overrides={p["scene_overrides"]!r} rejected; '
                                  f'allowed: empty or a YAML mapping')
+        # structured overrides: every scene.<key> parameter given at start-up, declared so that
+        # `ros2 param list/describe` shows it; the scene's validation refuses unknown keys, bad values
+        names = scene_override_names(self._parameter_overrides)
+        for name in names:
+            self.declare_parameter(name, self._parameter_overrides[name].value, scene_override_descriptor(name))
+        if names:
+            from pulsejet_sim.scene import merge
+            overrides = merge(overrides or {}, scene_overrides({n: self.get_parameter(n).value for n in names}))
+            self.get_logger().info('scene overrides: ' + ', '.join(f'{n}={self.get_parameter(n).value!r}'
+                                                                   for n in names))
         # command_driven: a shell scene's built-in cable routine comes from pulsejet/cmd/* instead
         self.scene = load_scene(p['scene'], overrides=overrides, command_driven=True)
         rate = p['publish_rate_hz'] or float(getattr(self.scene, 'publish_rate_hz', 0.0) or DEFAULT_PUBLISH_RATE_HZ)
@@ -130,7 +166,7 @@ class SimNode(Node):
             pacing=p['pacing'], real_time_factor=p['real_time_factor'], publish_rate_hz=rate,
             duration_s=p['duration_s'], step_count=p['step_count'], watchdog_timeout_s=p['watchdog_timeout_s'],
             watchdog_action=p['watchdog_action'], watchdog_clock=p['watchdog_clock'],
-            control_period_s=p['control_period_s'], paused=p['start_paused'])
+            control_period_s=p['control_period_s'], paused=p['start_paused'], lookahead_s=p['lookahead_s'])
         self.session = eng.Session(sim, config, now=time.monotonic())
         self.sim = sim
         self.wait_for_subscribers = p['wait_for_subscribers']
@@ -189,11 +225,14 @@ class SimNode(Node):
         if self._pacing_thread is None:
             self._pacing_thread = threading.Thread(target=self._pacing_loop, name='sim_node pacing', daemon=True)
             self._pacing_thread.start()
+            self._outbox.start()
 
     def close(self):
         self._stop_pacing.set()
+        self._wake.set()
         if self._pacing_thread is not None:
             self._pacing_thread.join(2.0)
+        self._outbox.close()
 
     def on_stop(self, signum):
         if signum is not None:
@@ -214,9 +253,16 @@ class SimNode(Node):
         period = self.tick_period_s
         next_tick = time.monotonic()
         while not self._stop_pacing.is_set() and not self.session.done:
+            self._wake.clear()   # before draining: a command arriving from here on wakes the wait below
+            now = time.monotonic()
             try:
                 with self._lock:
-                    self._emit(self._tick(time.monotonic()))
+                    self._apply_inbox()   # in closed_loop pacing this runs the next control period
+                    if now >= next_tick:
+                        self._emit(self._tick(now))
+                        next_tick += period
+                        if next_tick < now - period:   # more than a period late: restart the grid (no burst)
+                            next_tick = now
             except Exception as exc:   # a bug: report it, stop the node with a failure
                 import traceback
                 traceback.print_exc()
@@ -224,13 +270,9 @@ class SimNode(Node):
                 self.session.exit_code = 2
                 self.session.done = self._finished = True
                 return
-            next_tick += period
-            now = time.monotonic()
-            if next_tick < now - period:   # more than a period late: restart the grid (no burst)
-                next_tick = now
-            delay = next_tick - now
+            delay = next_tick - time.monotonic()
             if delay > 0:
-                self._stop_pacing.wait(delay) if delay > 0.002 else time.sleep(delay)
+                self._wake.wait(delay)   # a command (or the stop) wakes the loop early
 
     def _tick(self, now: float) -> list:
         s = self.session
@@ -252,17 +294,28 @@ class SimNode(Node):
     def _emit(self, events):
         self._emit_events(events)
         if self.session.done:
+            self._outbox.flush()
             self._finished = True
 
     def _emit_events(self, events):
         log = self.get_logger()
         for e in events:
             if isinstance(e, eng.Publish):
-                self._publish(e.observation, e.ledger)
+                calls = self._publication(e.observation, e.ledger)
+                if e.due_wall is not None:   # computed ahead: the outbox sends it at its wall time
+                    self._outbox.put(e.due_wall, calls)
+                    self._outbox_due = e.due_wall
+                else:
+                    self._send_now(calls)
             elif isinstance(e, eng.Applied):
-                self._pubs[messages.TOPIC_APPLIED_COMMAND].publish(messages.applied_command_message(e.command, e.time_s))
+                call = functools.partial(self._pubs[messages.TOPIC_APPLIED_COMMAND].publish,
+                                         messages.applied_command_message(e.command, e.time_s))
+                if self._outbox.pending():   # right after the last state computed without it
+                    self._outbox.put(self._outbox_due, [call])
+                else:
+                    call()
             elif isinstance(e, eng.PublishLedger):
-                self._publish_ledger(e.time_s)
+                self._send_now(self._ledger_publication(e.time_s))
             elif isinstance(e, eng.Log):   # one call site per severity (rclpy requires it)
                 if e.level == 'error':
                     log.error(e.text)
@@ -271,28 +324,40 @@ class SimNode(Node):
                 else:
                     log.info(e.text)
             elif isinstance(e, eng.Halted):
+                self._outbox.flush()
                 self._publish_diagnostics()
 
-    def _publish(self, obs, ledger=False):
+    def _send_now(self, calls):
+        self._outbox.flush()   # what was computed earlier goes first
+        for call in calls:
+            call()
+
+    def _publication(self, obs, ledger=False) -> list:
+        """The publish calls of one state, its messages built now (they hold this state)."""
         if not eng.observation_is_finite(obs):   # never publish NaN
-            return
+            return []
+        calls = []
         profile = self.sim.profile() if self.has_profile else None
         if profile is not None and not all(math.isfinite(float(v)) for arr in profile for v in arr):
             profile = None
         if profile is not None:   # before /clock, which the state's consumers take as its end
-            self._pubs[messages.TOPIC_MANTLE_PROFILE].publish(messages.profile_message(*profile, obs.time_s))
+            calls.append(functools.partial(self._pubs[messages.TOPIC_MANTLE_PROFILE].publish,
+                                           messages.profile_message(*profile, obs.time_s)))
         for topic, msg in messages.observation_messages(obs, messages.FRAME_ID, *self.frames):
-            self._pubs[topic].publish(msg)
+            calls.append(functools.partial(self._pubs[topic].publish, msg))
         if ledger:
-            self._publish_ledger(obs.time_s)
+            calls += self._ledger_publication(obs.time_s)
             if profile is not None:   # the 3-D view at the ledger's rate, in the odometry's body frame
-                self._pubs[messages.TOPIC_MANTLE_MARKER].publish(
-                    messages.mantle_marker(*profile, obs.time_s, self.frames[1]))
+                calls.append(functools.partial(self._pubs[messages.TOPIC_MANTLE_MARKER].publish,
+                                               messages.mantle_marker(*profile, obs.time_s, self.frames[1])))
+        return calls
 
-    def _publish_ledger(self, time_s):
+    def _ledger_publication(self, time_s) -> list:
         values = self.sim.energy_ledger()
-        if all(math.isfinite(v) for v in values.values()):
-            self._pubs[messages.TOPIC_ENERGY_LEDGER].publish(messages.ledger_message(values, time_s))
+        if not all(math.isfinite(v) for v in values.values()):
+            return []
+        return [functools.partial(self._pubs[messages.TOPIC_ENERGY_LEDGER].publish,
+                                  messages.ledger_message(values, time_s))]
 
     # -- commands -------------------------------------------------------------------------------
     def _on_actuator(self, topic, field):
@@ -304,22 +369,49 @@ class SimNode(Node):
         try:
             stamp_s, values = messages.command_values(msg)
         except ValueError as exc:
-            self.get_logger().warning(f'{messages.TOPIC_CMD_COMMAND}: rejected: {exc}; command kept')
+            # counted and logged in order with the others, by the pacing thread
+            self._accept(None, None, f'{messages.TOPIC_CMD_COMMAND}: rejected: {exc}; command kept')
             return
         self._accept(values, stamp_s, messages.TOPIC_CMD_COMMAND)
 
     def _accept(self, values, stamp_s, source):
-        with self._lock:
+        self._inbox.append((values, stamp_s, source, time.monotonic()))
+        self._wake.set()
+
+    def _apply_inbox(self):
+        """Apply the commands received so far (under the lock, before any stepping or service)."""
+        while self._inbox:
+            values, stamp_s, source, received = self._inbox.popleft()
+            if values is None:   # a message that did not parse; `source` holds the reason
+                self.session.command_counts['rejected'] += 1
+                self._warn_rejected(source)
+                continue
             try:
-                events = self.session.accept(values, time.monotonic(), stamp_s, source)
+                events = self.session.accept(values, received, stamp_s, source)
             except CommandError as exc:
-                self.get_logger().warning(f'{source}: {exc}; command kept at {self.session.command}')
-                return
+                self._warn_rejected(f'{source}: {exc}; command kept at {self.session.command}')
+                continue
             self._emit(events)
+
+    def _warn_rejected(self, text):
+        # a token bucket: a publisher flooding bad values must not spend the node's time on logging
+        now = time.monotonic()
+        self._warn_tokens = min(REJECTION_LOG_BURST,
+                                self._warn_tokens + (now - self._warn_refilled) * REJECTION_LOG_RATE_HZ)
+        self._warn_refilled = now
+        if self._warn_tokens < 1.0:
+            self._warn_suppressed += 1
+            return
+        self._warn_tokens -= 1.0
+        if self._warn_suppressed:
+            text += f' ({self._warn_suppressed} more rejections not logged; see commands_rejected in /diagnostics)'
+            self._warn_suppressed = 0
+        self.get_logger().warning(text)
 
     # -- parameters and services ----------------------------------------------------------------
     def _on_set_parameters(self, params):
         with self._lock:
+            self._apply_inbox()
             checked, rejection = check_parameters(params, PARAMETER_SPECS)
             if rejection is not None or not self._ready:   # at declaration the values are read in __init__
                 return rejection or SetParametersResult(successful=True)
@@ -331,18 +423,21 @@ class SimNode(Node):
 
     def _on_pause(self, request, response):
         with self._lock:
+            self._apply_inbox()
             response.success, response.message, events = self.session.pause(bool(request.data), time.monotonic())
             self._emit(events)
         return response
 
     def _on_step(self, request, response):
         with self._lock:
+            self._apply_inbox()
             response.success, response.message, events = self.session.step(time.monotonic())
             self._emit(events)
         return response
 
     def _on_reset(self, request, response):
         with self._lock:
+            self._apply_inbox()
             message, events = self.session.reset(time.monotonic())
             self._emit(events)
         response.success = True
@@ -353,6 +448,7 @@ class SimNode(Node):
     def _publish_diagnostics(self):
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
         with self._lock:
+            self._apply_inbox()
             level, message, values = self.session.health(time.monotonic())
             status = DiagnosticStatus(level={eng.OK: DiagnosticStatus.OK, eng.WARN: DiagnosticStatus.WARN,
                                              eng.ERROR: DiagnosticStatus.ERROR}[level],
@@ -370,6 +466,9 @@ class SimNode(Node):
 
 def main(args=None):
     from pulsejet_sim.node_main import run_node
+    # the pacing thread must get the GIL within a fraction of a publication period when the executor
+    # thread is busy (CPython's default switch interval is 5 ms); the kernels release it while stepping
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     return run_node('sim_node', SimNode, args)
 
 

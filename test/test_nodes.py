@@ -11,6 +11,7 @@ import subprocess
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import isolate_ros
 from pulsejet_sim.node_params import node_command
@@ -378,3 +379,32 @@ def test_controller_target_volume_mode(start_node, probe):
     assert at(1.0, 1.9e-3) == 1.0e-3     # below the target: still inflating
     assert at(1.1, 2.05e-3) == 0.0       # target reached: hold
     assert ctrl.stop() == 0, ctrl.output()[-3000:]
+
+
+@pytest.mark.timeout(120)
+def test_lookahead_sends_every_state_once_in_order_through_a_reset(tmp_path):
+    """With lookahead_s the physics runs ahead and a publishing thread sends each state at its wall
+    time: every period arrives once, in order, and a reset flushes the states computed ahead (they
+    are sent, not lost) before the clock goes back to 0."""
+    from pulsejet_sim.harness import SimHarness
+    period = 0.02
+    with SimHarness(scene='pump_cycle', parameters={'publish_rate_hz': 1 / period, 'lookahead_s': 0.2},
+                    log_dir=tmp_path) as h:
+        from std_srvs.srv import Trigger
+        h.wait_for(lambda s: s.time_s >= 0.6, 60.0)
+        last_received = h.latest.time_s
+        t_call = time.monotonic()
+        message = h.call('reset', Trigger.Request()).message
+        t_computed = float(message.split('from t=')[1].split()[0])
+        # the physics was ahead of what had been published
+        assert t_computed > last_received + 0.05, (message, last_received)
+        h.wait_for(lambda s: 0.3 <= s.time_s < 1.0, 60.0, since_wall=t_call)
+        h.spin(0.2)
+        times = np.array([s.time_s for s in h.states])
+    steps = np.diff(times)
+    back = np.flatnonzero(steps < 0)
+    assert back.size == 1, f'the clock went back {back.size} times (expected once, at the reset): {times}'
+    before, after = times[:back[0] + 1], times[back[0] + 1:]
+    assert after[0] == 0.0
+    for run in (before, after):
+        assert np.allclose(np.diff(run), period, atol=1e-9), f'a state missing or repeated: {run}'
