@@ -49,7 +49,10 @@ def test_a_restarted_sim_node_is_picked_up_by_the_controller_and_the_recorder(mo
             first.proc.send_signal(signal.SIGKILL)
             assert first.stop() == -signal.SIGKILL
             n_before = len(h.applied)
-            params = {'scene': 'pump_cycle', 'pacing': 'real_time'}
+            # held at t = 0 until the controller's, the harness's and the recorder's /clock
+            # subscriptions have discovered it (the compile cache makes the node start at once;
+            # without the hold it could pass the old run's time before anyone sees it go back)
+            params = {'scene': 'pump_cycle', 'pacing': 'real_time', 'wait_for_subscribers': 3}
             h.processes['sim_node'] = NodeProcess('pulsejet_sim.sim_node', params, tmp_path / 'sim_node.2.log',
                                                   h.environment())
             # the new run starts at t = 0 and the controller commands it again
