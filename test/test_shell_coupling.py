@@ -131,3 +131,46 @@ def test_constant_depth_muscle_moves_the_cone_inwards_by_one_depth():
     assert np.all(1.0 - 0.25 * model.E[:, sk.E_SMUS] >= 0.05 - 1e-12)   # capped where the cone is narrow
     proportional = ShellModel.from_scene(cone_scene('paper', actuation={**muscle, 'desired_radius': 'proportional'}))
     assert np.allclose(proportional.E[middle, sk.E_SMUS], 1.0)
+
+
+def test_constant_depth_to_edge_muscle_narrows_the_free_edge():
+    """The third reading of Fig. 12 (`constant_depth_to_edge`): the constant depth is held up to the
+    free edge (tapered at the pole only), so the muscle narrows the cone's nozzle; the study's
+    `constant_depth` tapers to zero at the edge and leaves the nozzle open."""
+    muscle = dict(kind='muscle', source='routine', amplitude=0.25, desired_radius='constant_depth_to_edge',
+                  taper_fraction=0.15, frequency_hz=1.5, contraction_s=0.2, release_s=0.3)
+    to_edge = ShellModel.from_scene(cone_scene('paper', actuation=muscle))
+    r0m = to_edge.E[:, sk.E_R0M]
+    depth = 0.25 * to_edge.E[:, sk.E_SMUS] * r0m
+    assert depth[-1] == pytest.approx(0.25 * r0m.max(), rel=1e-12)     # full depth at the edge element
+    assert depth[0] < 0.1 * depth[-1]                                   # still tapered at the pole
+    tapered = ShellModel.from_scene(cone_scene('paper', actuation={**muscle, 'desired_radius': 'constant_depth'}))
+    assert tapered.E[-1, sk.E_SMUS] < 0.1
+    xm = (np.arange(len(r0m)) + 0.5) / len(r0m)
+    assert np.array_equal(to_edge.E[xm < 0.5, sk.E_SMUS], tapered.E[xm < 0.5, sk.E_SMUS])   # same elsewhere
+    r_edge, r_tapered = to_edge.profile(run(to_edge, 0.2))[0][-1], tapered.profile(run(tapered, 0.2))[0][-1]
+    assert r_edge < 0.85 * 0.03, r_edge            # at full activation the nozzle has narrowed by > 15 %
+    assert r_tapered > 0.98 * 0.03, r_tapered      # the tapered function leaves it open
+    # the narrower nozzle is what the jet uses: the outlet area follows the edge
+    state = run(to_edge, 0.15)
+    vdot = state[6 * to_edge.n_nodes + sk.S_VDOT]
+    obs = to_edge.observe(state, 0.15, Command())
+    assert vdot < 0.0
+    assert -vdot / obs.jet_speed_m_s < math.pi * (0.95 * 0.03) ** 2
+
+
+def test_fixed_nozzle_with_a_free_edge_keeps_the_exit_area():
+    """`free_edge_fixed_nozzle` (the authors' later code: Area_out = pi Rn^2, Rn = 12.5 mm): the edge
+    moves as with `edge`, the jet leaves through the fixed nozzle."""
+    jet = dict(outlet='free_edge_fixed_nozzle', outlet_radius_m=0.0125, thrust_coefficient=1.0)
+    model = ShellModel.from_scene(cone_scene('paper', jet=jet))
+    state = run(model, 0.15)
+    r, _ = model.profile(state)
+    assert r[-1] < 0.95 * 0.03                     # the rising pull narrows the free edge ...
+    vdot = state[6 * model.n_nodes + sk.S_VDOT]
+    obs = model.observe(state, 0.15, Command())
+    assert vdot < 0.0
+    assert -vdot / obs.jet_speed_m_s == pytest.approx(math.pi * 0.0125 ** 2, rel=1e-9)   # ... not the nozzle
+    edge = ShellModel.from_scene(cone_scene('paper'))
+    # in the paper coupling no cavity pressure acts on the wall, so the exit area does not change the shell
+    assert np.array_equal(model.profile(state)[0], edge.profile(run(edge, 0.15))[0])

@@ -45,8 +45,10 @@ the water loads the wall only through drag and added mass (no cavity pressure), 
 vehicle velocity enters only the position update.  Its ledger books the jet's kinetic energy flux
 ``1/2 rho A |u_j|^3``, which no wall force pays for in that scheme, as ``created_unpaid_jet_kinetic``.
 ``jet.outlet``: ``ring`` (a fixed outlet of ``outlet_radius_m`` in the clamped ring; the consistent
-default) or ``edge`` (the paper default: the mantle's free edge is the nozzle, radius and angle free
-at that edge, ``A_out = pi r_edge(t)^2``).
+default), ``edge`` (the paper default: the mantle's free edge is the nozzle, radius and angle free
+at that edge, ``A_out = pi r_edge(t)^2``) or ``free_edge_fixed_nozzle`` (the edge free as with ``edge``,
+but the jet leaves through a fixed nozzle of ``outlet_radius_m``, ``A_out = pi r_n^2``: the authors'
+later code, ``Area_out = pi*Rn.^2`` with ``Rn = 12.5e-3``, whose exit area does not follow the shell).
 
 *Energy ledger.*  Stored: elastic, shell + payload kinetic ("vehicle"), added-mass kinetic
 ("outer fluid"), ``1/2 rho V U^2`` ("internal").  In: actuation work (cable force times wall
@@ -90,13 +92,15 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
                  shear_correction: 1, rotary_inertia_scale: 1}
     fluid:      {density_kg_m3, added_mass_coefficient: 1.1, added_mass_length_m: max(r0)/2,
                  tangential_drag_coefficient: 0.05, drag_coefficient: 1.0}
-    jet:        {outlet: ring|edge, outlet_radius_m: ring/2 (ring only), inlet_area_m2: A_out + 3 pi (10 mm)^2,
+    jet:        {outlet: ring|edge|free_edge_fixed_nozzle, outlet_radius_m: ring/2 (not with edge),
+                 inlet_area_m2: A_out + 3 pi (10 mm)^2,
                  thrust_coefficient: 1}
     vehicle:    {mass_kg (shell + payload), added_mass_kg: 0, initial_velocity_m_s: 0}
     actuation:  {kind: none|cable|muscle, source: routine|command (cable only),
                  amplitude (cable: peak total radial pull, N; muscle: fractional drop of the desired
                  hoop radius, 0..0.95), distribution: uniform|rising|falling (cable),
-                 taper_fraction: 0.15, desired_radius: proportional|constant_depth (muscle),
+                 taper_fraction: 0.15, desired_radius: proportional|constant_depth|
+                 constant_depth_to_edge (muscle),
                  frequency_hz, contraction_s, release_s, start_delay_s}
     terms:      {viscosity, drag, added_mass, jet, vehicle_motion: all true}
     load:       {internal_pressure_pa: 0}   (static pressure load, for tests)
@@ -107,7 +111,7 @@ The cable routine: activation ``a(t)`` rises as a half cosine over ``contraction
 distributed over the free nodes with weights uniform, proportional to X/L (``rising``: largest
 at the ring) or to 1 - X/L (``falling``: largest at the pole).  The muscle routine lowers the
 desired hoop stretch to ``tau_d = 1 - amplitude a(t) s(X)`` (``s`` = 1 with smooth tapers at the
-ends); the work it does is ``dW/dt`` at fixed shape.
+ends, at the pole only for ``constant_depth_to_edge``); the work it does is ``dW/dt`` at fixed shape.
 """
 from __future__ import annotations
 
@@ -129,8 +133,8 @@ TERMS = {'viscosity': True, 'drag': True, 'added_mass': True, 'jet': True, 'vehi
 ACTUATION_KINDS = ('none', 'cable', 'muscle')
 DISTRIBUTIONS = ('uniform', 'rising', 'falling')
 COUPLINGS = ('consistent', 'paper')
-OUTLETS = ('ring', 'edge')
-DESIRED_RADIUS = ('proportional', 'constant_depth')
+OUTLETS = ('ring', 'edge', 'free_edge_fixed_nozzle')
+DESIRED_RADIUS = ('proportional', 'constant_depth', 'constant_depth_to_edge')
 ERR_TEXT = {
     sk.ERR_NONFINITE: 'non-finite state (NaN/inf)',
     sk.ERR_AXIS: 'the mantle wall crossed the symmetry axis (r < 0): the collapse is too deep for this '
@@ -193,11 +197,21 @@ def muscle_shape(desired: str, Xm: np.ndarray, r0m: np.ndarray, taper: float, am
     ``amp a(t) max(r0) s(X)`` everywhere, so on a cone it is again a straight line parallel to the wall,
     and on an ellipsoid it is the ellipse moved inwards; the hoop strain it asks for is then largest
     where the mantle is narrow, capped at a desired stretch of 0.05.  ``s(X)`` is 1 over the mantle
-    and falls smoothly to 0 over ``taper`` of the meridian at the pole and at the edge."""
+    and falls smoothly to 0 over ``taper`` of the meridian at the pole and at the edge.
+
+    ``constant_depth_to_edge`` (a third reading of Fig. 12, run as an experiment): ``constant_depth``
+    held up to the free edge, tapered at the pole only.  Section 5.2 says the function is "linear
+    (constant) for most of the mantle profile", and the muscles are "a network of circular muscles
+    symmetrically arranged all around the body" (introduction): the part of the profile where the
+    function is not linear is read as the pole (the cone's rounded tip, where a constant depth cannot
+    hold), not the edge, so the muscle narrows the nozzle too."""
     def smooth(x):
         x = np.clip(x, 0.0, 1.0)
         return x * x * (3 - 2 * x)
-    s = smooth(Xm / taper) * smooth((1 - Xm) / taper)
+    if desired == 'constant_depth_to_edge':
+        s = smooth(Xm / taper)
+    else:
+        s = smooth(Xm / taper) * smooth((1 - Xm) / taper)
     if desired == 'proportional':
         return s
     depth = s * float(r0m.max()) / r0m
@@ -320,6 +334,7 @@ class ShellModel:
                 raise ModelError(f'jet.outlet_radius_m: {jet["outlet_radius_m"]!r} is not used with outlet: edge '
                                  f'(the outlet is the mantle edge, radius {rring:.4g} m at rest); allowed: leave it '
                                  f'out, or outlet: ring')
+        free_edge = outlet in ('edge', 'free_edge_fixed_nozzle')
         r_out = rring if outlet == 'edge' else _num(jet, 'outlet_radius_m', 'jet', 1e-4, rring, default=0.5 * rring)
         A_out = math.pi * r_out ** 2
         A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01 ** 2)
@@ -380,7 +395,7 @@ class ShellModel:
         Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXZ] = Nd[-1, sk.N_FIXT] = 1.0
         free = np.ones(n1, bool)
         free[0] = free[-1] = False
-        if outlet == 'edge':
+        if free_edge:
             # our reading of paper 000 section 5.1 ("a shrinkage of the nozzle area"): the edge carries
             # no prescribed radius or angle (zero wrench), only its axial place on the body
             Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXT] = 0.0
@@ -429,7 +444,7 @@ class ShellModel:
                 xi = X / X[-1]
                 shape = {'uniform': np.ones(n1), 'rising': xi, 'falling': 1.0 - xi}[dist]
                 w = shape * free
-                if outlet == 'edge':
+                if free_edge:
                     # the load is distributed along the meridian: a free end node carries half an
                     # element's share (trapezoidal rule), interior nodes a whole one (equal elements)
                     w[-1] *= 0.5
