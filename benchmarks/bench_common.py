@@ -1,10 +1,11 @@
 """Header (date, machine, CPU, Python, command) and writer of the stored benchmark tables."""
+
 from __future__ import annotations
 
 import datetime
 import os
-import platform
 from pathlib import Path
+import platform
 
 RESULTS = Path(__file__).resolve().parent / 'results'
 
@@ -21,8 +22,11 @@ def cpu_model() -> str:
 
 def header(title: str, command: str) -> str:
     now = datetime.datetime.now(datetime.timezone.utc)
-    return (f'# {title}\n\n{now:%Y-%m-%d %H:%M UTC}, {platform.machine()}, {cpu_model()}, {os.cpu_count()} cores '
-            f'(shared with other jobs), Python {platform.python_version()}\n\ncommand: `.venv/bin/{command}`\n\n')
+    return (
+        f'# {title}\n\n{now:%Y-%m-%d %H:%M UTC}, {platform.machine()}, {cpu_model()},'
+        f' {os.cpu_count()} cores (shared with other jobs), Python'
+        f' {platform.python_version()}\n\ncommand: `.venv/bin/{command}`\n\n'
+    )
 
 
 def write(name: str, text: str) -> Path:

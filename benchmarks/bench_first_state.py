@@ -1,7 +1,8 @@
-"""Benchmark: wall time from starting a freshly `colcon build`-installed sim_node to its first state.
+"""
+Benchmark: wall time from starting a freshly `colcon build`-installed sim_node to its first state.
 
-    .venv/bin/python benchmarks/bench_first_state.py [--scenes pump_cycle shell_robot] [--repeats 3]
-                                                     [--keep WORKDIR]
+    .venv/bin/python benchmarks/bench_first_state.py [--scenes pump_cycle shell_robot]
+                                                     [--repeats 3] [--keep WORKDIR]
 
 Copies the repository into a temporary colcon workspace (as test/test_colcon_build.py does) and
 builds it twice with the venv's colcon:
@@ -10,19 +11,22 @@ builds it twice with the venv's colcon:
             numba cache files are deleted, so every start is a fresh install's first start;
   - warmed: a plain `colcon build` (setup.py compiles the shipped scenes' kernels into the
             installed tree's numba cache).
-For each scene it starts the installed console script install/pulsejet_sim/lib/pulsejet_sim/sim_node
-with the environment of `. install/setup.sh` (what `ros2 run` does), without the rclpy wheels'
-bootstrap guard so the interpreter re-executes itself at start-up as it does for a user, in an
-isolated DDS domain (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), and measures from Popen to
+For each scene it starts the installed console script
+install/pulsejet_sim/lib/pulsejet_sim/sim_node with the environment of `. install/setup.sh` (what
+`ros2 run` does), without the rclpy wheels' bootstrap guard so the interpreter re-executes itself
+at start-up as it does for a user, in an isolated DDS domain
+(ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), and measures from Popen to
   - the node's first output line (its first log line), and
   - the first /clock message received by a subscriber in this process (the first published state).
 Writes benchmarks/results/first_state.md (date, machine, command, table). Not a test.
 """
+
 from __future__ import annotations
 
 import argparse
 import datetime as _dt
 import os
+from pathlib import Path
 import platform
 import shutil
 import signal
@@ -32,13 +36,24 @@ import sys
 import tempfile
 import threading
 import time
-from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = 'pulsejet_sim'
 RESULTS = REPO / 'benchmarks' / 'results' / 'first_state.md'
-EXCLUDE = ('.venv', 'venv', 'build', 'install', 'log', 'runs', '.git', '__pycache__', '*.egg-info',
-           '.pytest_cache', '*.mcap', '*.png')
+EXCLUDE = (
+    '.venv',
+    'venv',
+    'build',
+    'install',
+    'log',
+    'runs',
+    '.git',
+    '__pycache__',
+    '*.egg-info',
+    '.pytest_cache',
+    '*.mcap',
+    '*.png',
+)
 BOOTSTRAP_GUARD = '_ROS_WHEELS_BOOTSTRAP_COMPLETE'
 TIMEOUT_S = 300.0
 
@@ -51,7 +66,11 @@ def base_env() -> dict:
 
 
 def colcon_build(ws: Path, warm: bool) -> tuple[float, str]:
-    """Fresh workspace: copy the repository, colcon build; returns (seconds, the warm-up log line)."""
+    """
+    Build a fresh workspace: copy the repository, colcon build.
+
+    Returns (seconds, the warm-up log line).
+    """
     shutil.copytree(REPO, ws / 'src' / PACKAGE, ignore=shutil.ignore_patterns(*EXCLUDE))
     env = base_env()
     if warm:
@@ -59,23 +78,36 @@ def colcon_build(ws: Path, warm: bool) -> tuple[float, str]:
     else:
         env['PULSEJET_SKIP_NUMBA_WARMUP'] = '1'
     exe = Path(sys.executable).parent / 'colcon'
-    cmd = ([str(exe)] if exe.exists() else [sys.executable, '-m', 'colcon']) + \
-        ['build', '--event-handlers', 'console_direct+']
+    cmd = ([str(exe)] if exe.exists() else [sys.executable, '-m', 'colcon']) + [
+        'build',
+        '--event-handlers',
+        'console_direct+',
+    ]
     t0 = time.monotonic()
     proc = subprocess.run(cmd, cwd=ws, env=env, capture_output=True, text=True, timeout=3600)
     seconds = time.monotonic() - t0
     if proc.returncode:
         sys.exit(f'colcon build failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}')
-    line = next((ln for ln in (proc.stdout + proc.stderr).splitlines() if 'numba compile cache' in ln), '')
+    line = next(
+        (ln for ln in (proc.stdout + proc.stderr).splitlines() if 'numba compile cache' in ln), ''
+    )
     return seconds, line.strip()
 
 
 def sourced_env(ws: Path, domain: int) -> dict:
-    """The environment after `. install/setup.sh`, as a user's shell has it before `ros2 run`."""
-    out = subprocess.run(['sh', '-c', f'. "{ws}/install/setup.sh" && env -0'], env=base_env(),
-                         capture_output=True, check=True).stdout.decode()
+    """
+    Return the environment after `. install/setup.sh`.
+
+    As a user's shell has it before `ros2 run`.
+    """
+    out = subprocess.run(
+        ['sh', '-c', f'. "{ws}/install/setup.sh" && env -0'],
+        env=base_env(),
+        capture_output=True,
+        check=True,
+    ).stdout.decode()
     env = dict(item.split('=', 1) for item in out.split('\0') if '=' in item)
-    env.pop(BOOTSTRAP_GUARD, None)     # the console script re-executes itself like a user's would
+    env.pop(BOOTSTRAP_GUARD, None)  # the console script re-executes itself like a user's would
     env['ROS_DOMAIN_ID'] = str(domain)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['PYTHONUNBUFFERED'] = '1'
@@ -88,21 +120,33 @@ def installed_cache_files(ws: Path) -> list[Path]:
 
 
 class ClockWatch:
-    """A /clock subscriber in this process; first_at holds the monotonic time of the first message."""
+    """
+    A /clock subscriber in this process.
+
+    first_at holds the monotonic time of the first message.
+    """
 
     def __init__(self, domain: int):
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
+
         self.rclpy = rclpy
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain,
-                   signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        rclpy.init(
+            context=self.context,
+            domain_id=domain,
+            signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+        )
         self.node = rclpy.create_node('bench_first_state', context=self.context)
         self.first_at = None
-        self.node.create_subscription(Clock, '/clock', self._on_clock,
-                                      QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        self.node.create_subscription(
+            Clock,
+            '/clock',
+            self._on_clock,
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT),
+        )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
@@ -126,7 +170,11 @@ class ClockWatch:
 
 
 def cpu_seconds(pid: int) -> float:
-    """user + system CPU seconds of a process so far (Linux /proc; the rclpy wheels' re-exec keeps the pid)."""
+    """
+    User + system CPU seconds of a process so far.
+
+    From Linux /proc; the rclpy wheels' re-exec keeps the pid.
+    """
     try:
         fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
         return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
@@ -135,30 +183,48 @@ def cpu_seconds(pid: int) -> float:
 
 
 def first_state(ws: Path, scene: str, domain: int) -> tuple[float, float, float]:
-    """(seconds to the first output line, seconds to the first /clock, CPU seconds the node used up to
-    the first /clock) of one start of the installed sim_node."""
+    """
+    Time one start of the installed sim_node to its first output and first /clock.
+
+    (seconds to the first output line, seconds to the first /clock, CPU seconds the node used up to
+    the first /clock) of one start of the installed sim_node.
+    """
     env = sourced_env(ws, domain)
     exe = ws / 'install' / PACKAGE / 'lib' / PACKAGE / 'sim_node'
     watch = ClockWatch(domain)
     first_line = [None]
     try:
-        time.sleep(0.5)    # the subscriber is up before the node starts
+        time.sleep(0.5)  # the subscriber is up before the node starts
         t0 = time.monotonic()
-        proc = subprocess.Popen([str(exe), '--ros-args', '-p', f'scene:={scene}'], env=env, cwd=ws,
-                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        proc = subprocess.Popen(
+            [str(exe), '--ros-args', '-p', f'scene:={scene}'],
+            env=env,
+            cwd=ws,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            start_new_session=True,
+        )
 
         def read():
             for line in proc.stdout:
                 if first_line[0] is None and line.strip():
                     first_line[0] = time.monotonic()
+
         reader = threading.Thread(target=read, daemon=True)
         reader.start()
         try:
-            while watch.first_at is None and proc.poll() is None and time.monotonic() - t0 < TIMEOUT_S:
+            while (
+                watch.first_at is None
+                and proc.poll() is None
+                and time.monotonic() - t0 < TIMEOUT_S
+            ):
                 time.sleep(0.005)
             if watch.first_at is None:
-                raise RuntimeError(f'no /clock from sim_node (scene {scene}) within {TIMEOUT_S:.0f} s '
-                                   f'(exit status {proc.poll()})')
+                raise RuntimeError(
+                    f'no /clock from sim_node (scene {scene}) within {TIMEOUT_S:.0f} s '
+                    f'(exit status {proc.poll()})'
+                )
             cpu = cpu_seconds(proc.pid)
         finally:
             if proc.poll() is None:
@@ -185,9 +251,13 @@ def machine() -> str:
     except OSError:
         pass
     import numba
-    return (f'{platform.node()}: {cpu}, {os.cpu_count()} cores (nproc), load average '
-            f'{", ".join(f"{x:.2f}" for x in os.getloadavg())} at start; Python {platform.python_version()}, '
-            f'numba {numba.__version__}, {platform.system()} {platform.release()}')
+
+    return (
+        f'{platform.node()}: {cpu}, {os.cpu_count()} cores (nproc), load average'
+        f' {", ".join(f"{x:.2f}" for x in os.getloadavg())} at start; Python'
+        f' {platform.python_version()}, numba {numba.__version__}, {platform.system()}'
+        f' {platform.release()}'
+    )
 
 
 def fmt(values: list[float]) -> str:
@@ -199,13 +269,19 @@ def fmt(values: list[float]) -> str:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--scenes', nargs='+', default=['pump_cycle', 'shell_robot'])
-    parser.add_argument('--repeats', type=int, default=3, help='starts per scene with the warmed cache')
-    parser.add_argument('--cold-repeats', type=int, default=1, help='starts per scene with an empty cache')
+    parser.add_argument(
+        '--repeats', type=int, default=3, help='starts per scene with the warmed cache'
+    )
+    parser.add_argument(
+        '--cold-repeats', type=int, default=1, help='starts per scene with an empty cache'
+    )
     parser.add_argument('--keep', help='build the workspaces under this directory and keep them')
-    parser.add_argument('--no-write', action='store_true', help=f'do not write {RESULTS.relative_to(REPO)}')
+    parser.add_argument(
+        '--no-write', action='store_true', help=f'do not write {RESULTS.relative_to(REPO)}'
+    )
     args = parser.parse_args(argv)
 
-    domain = 215 + os.getpid() % 18     # 215-232: isolated from the tests' 1-101
+    domain = 215 + os.getpid() % 18  # 215-232: isolated from the tests' 1-101
     started = _dt.datetime.now().astimezone()
     host = machine()
     root = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix='bench_first_state_'))
@@ -229,12 +305,18 @@ def main(argv=None) -> int:
                 for path in installed_cache_files(ws_cold):
                     path.unlink()
                 cold.append(first_state(ws_cold, scene, domain))
-                print(f'  {scene} cold:   first line {cold[-1][0]:.2f} s, first /clock {cold[-1][1]:.2f} s, '
-                      f'CPU {cold[-1][2]:.2f} s', flush=True)
+                print(
+                    f'  {scene} cold:   first line {cold[-1][0]:.2f} s, first /clock'
+                    f' {cold[-1][1]:.2f} s, CPU {cold[-1][2]:.2f} s',
+                    flush=True,
+                )
             for _ in range(args.repeats):
                 warm.append(first_state(ws_warm, scene, domain))
-                print(f'  {scene} warmed: first line {warm[-1][0]:.2f} s, first /clock {warm[-1][1]:.2f} s, '
-                      f'CPU {warm[-1][2]:.2f} s', flush=True)
+                print(
+                    f'  {scene} warmed: first line {warm[-1][0]:.2f} s, first /clock'
+                    f' {warm[-1][1]:.2f} s, CPU {warm[-1][2]:.2f} s',
+                    flush=True,
+                )
             rows.append((scene, cold, warm))
     finally:
         if not args.keep:
@@ -243,33 +325,50 @@ def main(argv=None) -> int:
     cli = argv if argv is not None else sys.argv[1:]
     command = ' '.join(['.venv/bin/python', f'benchmarks/{Path(__file__).name}', *cli])
     lines = [
-        '# First state of a freshly installed sim_node: cold compile vs numba cache warmed at install',
+        (
+            '# First state of a freshly installed sim_node: cold compile vs numba cache warmed at'
+            ' install'
+        ),
         '',
         f'- date: {started:%Y-%m-%d %H:%M %Z}',
         f'- machine: {host}',
         f'- command: `{command}`',
-        f'- builds (fresh workspace each, `colcon build`): cold (PULSEJET_SKIP_NUMBA_WARMUP=1, as before the '
-        f'warm-up) {build_cold_s:.1f} s; warmed {build_warm_s:.1f} s, {n_cache} numba cache files in the '
-        f'installed tree; setup.py: `{warm_line}`',
-        '- measured: Popen of install/pulsejet_sim/lib/pulsejet_sim/sim_node (env of `. install/setup.sh`, the '
-        "rclpy wheels' interpreter re-exec included, default parameters but `scene`) to its first output line and "
-        'to the first /clock received by a subscriber already running in an isolated DDS domain; cold = the '
-        "installed tree's numba cache files deleted before each start (a fresh install's first start); "
-        f'seconds, median (min-max) over {args.repeats} warmed starts, {args.cold_repeats} cold. The CPU column '
-        '(user+system seconds of the node process up to its first state) does not depend on what else the '
-        'shared machine runs; the wall times do (see the load average)',
+        (
+            '- builds (fresh workspace each, `colcon build`): cold (PULSEJET_SKIP_NUMBA_WARMUP=1,'
+            f' as before the warm-up) {build_cold_s:.1f} s; warmed {build_warm_s:.1f} s, {n_cache}'
+            f' numba cache files in the installed tree; setup.py: `{warm_line}`'
+        ),
+        (
+            '- measured: Popen of install/pulsejet_sim/lib/pulsejet_sim/sim_node (env of `.'
+            " install/setup.sh`, the rclpy wheels' interpreter re-exec included, default"
+            ' parameters but `scene`) to its first output line and to the first /clock received'
+            ' by a subscriber already running in an isolated DDS domain; cold = the installed'
+            " tree's numba cache files deleted before each start (a fresh install's first"
+            f' start); seconds, median (min-max) over {args.repeats} warmed starts,'
+            f' {args.cold_repeats} cold. The CPU column (user+system seconds of the node process'
+            ' up to its first state) does not depend on what else the shared machine runs; the'
+            ' wall times do (see the load average)'
+        ),
         '',
-        '| scene | model | cold compile: first log line (s) | cold compile: first state (s) '
-        '| cold compile: CPU to first state (s) | warmed cache: first log line (s) '
-        '| warmed cache: first state (s) | warmed cache: CPU to first state (s) |',
+        (
+            '| scene | model | cold compile: first log line (s) | cold compile: first state (s) '
+            '| cold compile: CPU to first state (s) | warmed cache: first log line (s) '
+            '| warmed cache: first state (s) | warmed cache: CPU to first state (s) |'
+        ),
         '|---|---|---|---|---|---|---|---|',
     ]
     sys.path.insert(0, str(REPO))
     from pulsejet_sim.scene import load_scene_data
+
     for scene, cold, warm in rows:
         model = load_scene_data(scene)[0].get('model', '?')
-        lines.append(f'| {scene} | {model} | ' + ' | '.join(fmt([r[i] for r in cold]) for i in range(3)) + ' | '
-                     + ' | '.join(fmt([r[i] for r in warm]) for i in range(3)) + ' |')
+        lines.append(
+            f'| {scene} | {model} | '
+            + ' | '.join(fmt([r[i] for r in cold]) for i in range(3))
+            + ' | '
+            + ' | '.join(fmt([r[i] for r in warm]) for i in range(3))
+            + ' |'
+        )
     text = '\n'.join(lines) + '\n'
     print(text)
     if not args.no_write:

@@ -1,7 +1,8 @@
-"""Hardware-in-the-loop style benchmark: an external controller closes a loop on sim_node's state.
+"""
+Hardware-in-the-loop style benchmark: an external controller closes a loop on sim_node's state.
 
-    .venv/bin/python benchmarks/bench_hil.py [--seconds 60] [--rates 100 500 1000] [--real-time-factor 1]
-                                             [--no-write]
+    .venv/bin/python benchmarks/bench_hil.py [--seconds 60] [--rates 100 500 1000]
+                                             [--real-time-factor 1] [--no-write]
 
 For each state rate (sim_node `publish_rate_hz`), sim_node runs as a subprocess (real_time pacing)
 in an isolated ROS domain with localhost discovery, and this process is the controller: a
@@ -15,49 +16,70 @@ receive times (time.monotonic, one clock for both processes):
     receipt of that applied_command,
   - the real-time factor held over the measured window (simulated s / wall s of /clock),
   - sim_node's own physics cost per step (mean of its /diagnostics).
-Prints a markdown table and writes benchmarks/results/hil.md (header: date, nproc, python). Not a test.
+Prints a markdown table and writes benchmarks/results/hil.md (header: date, nproc, python).
+Not a test.
 """
+
 from __future__ import annotations
 
 import argparse
 import datetime as _dt
 import os
+from pathlib import Path
 import platform
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'hil.md'
-V0_M3, V1_M3 = 1.6e-3, 2.4e-3      # bang-bang band on the cavity volume
+V0_M3, V1_M3 = 1.6e-3, 2.4e-3  # bang-bang band on the cavity volume
 PUMP_M3_S = 2.5e-3
-FILL = (PUMP_M3_S, 0.0)            # (pump flow, valve opening)
+FILL = (PUMP_M3_S, 0.0)  # (pump flow, valve opening)
 JET = (0.0, 1.0)
 
 
-def run_rate(rate_hz: float, seconds: float, rtf: float, scene: str, domain: int, log_dir: Path) -> dict:
-    import rclpy
+def run_rate(
+    rate_hz: float, seconds: float, rtf: float, scene: str, domain: int, log_dir: Path
+) -> dict:
     from diagnostic_msgs.msg import DiagnosticArray
+    from pulsejet_sim.harness import NodeProcess
+    from pulsejet_sim.messages import command_from_applied
+    import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
-    from pulsejet_sim.harness import NodeProcess
-    from pulsejet_sim.messages import command_from_applied
-
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-               RCUTILS_LOGGING_BUFFERED_STREAM='0', PYTHONUNBUFFERED='1')
+    env = dict(
+        os.environ,
+        ROS_DOMAIN_ID=str(domain),
+        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+        RCUTILS_LOGGING_BUFFERED_STREAM='0',
+        PYTHONUNBUFFERED='1',
+    )
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    sim = NodeProcess('pulsejet_sim.sim_node', {
-        'scene': scene, 'pacing': 'real_time', 'real_time_factor': float(rtf), 'publish_rate_hz': float(rate_hz),
-        'start_paused': True}, log_dir / f'sim_node.{int(rate_hz)}.log', env)
+    sim = NodeProcess(
+        'pulsejet_sim.sim_node',
+        {
+            'scene': scene,
+            'pacing': 'real_time',
+            'real_time_factor': float(rtf),
+            'publish_rate_hz': float(rate_hz),
+            'start_paused': True,
+        },
+        log_dir / f'sim_node.{int(rate_hz)}.log',
+        env,
+    )
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(
+        context=context,
+        domain_id=domain,
+        signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+    )
     node = rclpy.create_node('bench_hil_controller', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -67,8 +89,10 @@ def run_rate(rate_hz: float, seconds: float, rtf: float, scene: str, domain: int
     clock_recv, clock_time = [], []
     latency_state, latency_applied = [], []
     physics_us = []
-    pubs = {'pump': node.create_publisher(Float64, 'pulsejet/cmd/pump_flow', qos),
-            'valve': node.create_publisher(Float64, 'pulsejet/cmd/valve', qos)}
+    pubs = {
+        'pump': node.create_publisher(Float64, 'pulsejet/cmd/pump_flow', qos),
+        'valve': node.create_publisher(Float64, 'pulsejet/cmd/valve', qos),
+    }
 
     def command(mode):
         st['mode'] = mode
@@ -122,20 +146,28 @@ def run_rate(rate_hz: float, seconds: float, rtf: float, scene: str, domain: int
     node.create_subscription(Clock, '/clock', on_clock, qos)
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, qos)
     from std_srvs.srv import SetBool
+
     pause = node.create_client(SetBool, 'pulsejet/pause')
 
     def spin_until(pred, timeout, what):
         end = time.monotonic() + timeout
         while not pred():
             if not sim.alive():
-                raise RuntimeError(f'sim_node exited with {sim.proc.returncode}:\n{sim.output()[-2000:]}')
+                raise RuntimeError(
+                    f'sim_node exited with {sim.proc.returncode}:\n{sim.output()[-2000:]}'
+                )
             if time.monotonic() > end:
                 raise RuntimeError(f'timed out waiting for {what}:\n{sim.output()[-2000:]}')
             executor.spin_once(timeout_sec=0.01)
 
     try:
-        spin_until(lambda: pause.service_is_ready() and all(p.get_subscription_count() > 0 for p in pubs.values())
-                   and st['volume'] is not None, 120.0, 'sim_node to start')
+        spin_until(
+            lambda: pause.service_is_ready()
+            and all(p.get_subscription_count() > 0 for p in pubs.values())
+            and st['volume'] is not None,
+            120.0,
+            'sim_node to start',
+        )
         command(FILL)
         future = pause.call_async(SetBool.Request(data=False))
         spin_until(future.done, 30.0, 'resume')
@@ -155,11 +187,18 @@ def run_rate(rate_hz: float, seconds: float, rtf: float, scene: str, domain: int
 
     def pct(a, q):
         return float(np.percentile(a, q)) if a.size else float('nan')
+
     return {
-        'rate_hz': rate_hz, 'messages': int(t.size), 'achieved_hz': float((t.size - 1) / (t[-1] - t[0])),
-        'jitter_p50_ms': pct(dev, 50) * 1e3, 'jitter_p99_ms': pct(dev, 99) * 1e3,
-        'latency_p50_ms': pct(ls, 50), 'latency_p99_ms': pct(ls, 99), 'latency_n': int(ls.size),
-        'applied_p50_ms': pct(la, 50), 'applied_p99_ms': pct(la, 99),
+        'rate_hz': rate_hz,
+        'messages': int(t.size),
+        'achieved_hz': float((t.size - 1) / (t[-1] - t[0])),
+        'jitter_p50_ms': pct(dev, 50) * 1e3,
+        'jitter_p99_ms': pct(dev, 99) * 1e3,
+        'latency_p50_ms': pct(ls, 50),
+        'latency_p99_ms': pct(ls, 99),
+        'latency_n': int(ls.size),
+        'applied_p50_ms': pct(la, 50),
+        'applied_p99_ms': pct(la, 99),
         'rtf_held': float((s[-1] - s[0]) / (t[-1] - t[0])),
         'physics_us': float(np.nanmean(physics_us)) if physics_us else float('nan'),
         'exit_code': code,
@@ -167,49 +206,74 @@ def run_rate(rate_hz: float, seconds: float, rtf: float, scene: str, domain: int
 
 
 def table(results: list[dict], rtf: float) -> str:
-    lines = ['| state rate | achieved | period jitter p50 / p99 | command→state latency p50 / p99 (n) '
-             '| command→applied_command p50 / p99 | RTF held (requested) | physics cost |',
-             '|---|---|---|---|---|---|---|']
+    lines = [
+        (
+            '| state rate | achieved | period jitter p50 / p99 | command→state latency p50 / p99'
+            ' (n) | command→applied_command p50 / p99 | RTF held (requested) | physics cost |'
+        ),
+        '|---|---|---|---|---|---|---|',
+    ]
     for r in results:
         lines.append(
-            f"| {r['rate_hz']:g} Hz | {r['achieved_hz']:.1f} Hz | {r['jitter_p50_ms']:.3f} / {r['jitter_p99_ms']:.3f} ms "
-            f"| {r['latency_p50_ms']:.2f} / {r['latency_p99_ms']:.2f} ms ({r['latency_n']}) "
-            f"| {r['applied_p50_ms']:.2f} / {r['applied_p99_ms']:.2f} ms "
-            f"| {r['rtf_held']:.4f} ({rtf:g}) | {r['physics_us']:.2f} µs/step |")
+            f"| {r['rate_hz']:g} Hz | {r['achieved_hz']:.1f} Hz | {r['jitter_p50_ms']:.3f} /"
+            f" {r['jitter_p99_ms']:.3f} ms | {r['latency_p50_ms']:.2f} / {r['latency_p99_ms']:.2f}"
+            f" ms ({r['latency_n']}) | {r['applied_p50_ms']:.2f} / {r['applied_p99_ms']:.2f} ms |"
+            f" {r['rtf_held']:.4f} ({rtf:g}) | {r['physics_us']:.2f} µs/step |"
+        )
     return '\n'.join(lines)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--seconds', type=float, default=60.0, help='wall seconds measured per rate (default 60)')
-    ap.add_argument('--rates', type=float, nargs='+', default=[100.0, 500.0, 1000.0], help='state rates in Hz')
+    ap = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
+    ap.add_argument(
+        '--seconds', type=float, default=60.0, help='wall seconds measured per rate (default 60)'
+    )
+    ap.add_argument(
+        '--rates', type=float, nargs='+', default=[100.0, 500.0, 1000.0], help='state rates in Hz'
+    )
     ap.add_argument('--real-time-factor', type=float, default=1.0)
     ap.add_argument('--scene', default='pump_cycle')
-    ap.add_argument('--domain-id', type=int, default=None, help='ROS domain (default 215 + pid %% 18)')
+    ap.add_argument(
+        '--domain-id', type=int, default=None, help='ROS domain (default 215 + pid %% 18)'
+    )
     ap.add_argument('--no-write', action='store_true', help=f'do not write {RESULTS}')
     ap.add_argument('--note', default='', help='a line added under the header of the results file')
     args = ap.parse_args(argv)
     from pulsejet_sim.harness import default_domain_id
+
     domain = default_domain_id() if args.domain_id is None else args.domain_id
     results = []
     with tempfile.TemporaryDirectory(prefix='bench-hil-') as logs:
         for rate in args.rates:
             print(f'measuring {rate:g} Hz for {args.seconds:g} s ...', flush=True)
-            results.append(run_rate(rate, args.seconds, args.real_time_factor, args.scene, domain, Path(logs)))
+            results.append(
+                run_rate(rate, args.seconds, args.real_time_factor, args.scene, domain, Path(logs))
+            )
     now = _dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
-    header = (f'# HIL benchmark (external bang-bang controller on sim_node state)\n\n'
-              f'date: {now}; machine: nproc {len(os.sched_getaffinity(0))} ({os.cpu_count()} CPUs), '
-              f'{platform.machine()}, {platform.system()} {platform.release()}; python {platform.python_version()}\n'
-              f'command: `benchmarks/bench_hil.py --seconds {args.seconds:g} --rates '
-              f'{" ".join(f"{r:g}" for r in args.rates)} --real-time-factor {args.real_time_factor:g}`; '
-              f'scene {args.scene}, real_time pacing, {args.seconds:g} s measured per rate after 2 s of settling; '
-              f'controller: pump {PUMP_M3_S:g} m^3/s with the valve shut until volume > {V1_M3:g} m^3, then '
-              f'valve open until volume < {V0_M3:g} m^3\n'
-              + (f'\n{args.note}\n' if args.note else ''))
-    legend = ('\njitter: |receive period of /clock - 1/rate|. latency: wall time from the publication of a '
-              'command to the receipt of the first state computed with it (first /clock after the '
-              'pulsejet/applied_command showing it), and to the receipt of that applied_command. '
-              'physics cost: sim_node /diagnostics physics_us_per_step, mean. The controller decides on the state just received, i.e. right after a tick, so the command waits almost one publication period for the next tick: at 100 Hz the latency is about one period plus transport; at 500 and 1000 Hz transport and the queue of state messages both processes work through dominate. The cost per step grows at high rates because the batches get short (10 steps at 1000 Hz, 100 at 100 Hz) and the per-call overhead of Simulation.step is shared by fewer steps; on 2 cores the 1000 Hz stream is bounded by Python/DDS publishing in sim_node and receiving in the controller, not by the physics.\n')
+    header = (
+        f'# HIL benchmark (external bang-bang controller on sim_node state)\n\ndate: {now};'
+        f' machine: nproc {len(os.sched_getaffinity(0))} ({os.cpu_count()} CPUs),'
+        f' {platform.machine()}, {platform.system()} {platform.release()}; python'
+        f' {platform.python_version()}\ncommand: `benchmarks/bench_hil.py --seconds'
+        f' {args.seconds:g} --rates {" ".join(f"{r:g}" for r in args.rates)} --real-time-factor'
+        f' {args.real_time_factor:g}`; scene {args.scene}, real_time pacing, {args.seconds:g} s'
+        f' measured per rate after 2 s of settling; controller: pump {PUMP_M3_S:g} m^3/s with the'
+        f' valve shut until volume > {V1_M3:g} m^3, then valve open until volume < {V0_M3:g} m^3\n'
+        + (f'\n{args.note}\n' if args.note else '')
+    )
+    legend = (
+        '\njitter: |receive period of /clock - 1/rate|. latency: wall time from the publication of'
+        ' a command to the receipt of the first state computed with it (first /clock after the'
+        ' pulsejet/applied_command showing it), and to the receipt of that applied_command.'
+        ' physics cost: sim_node /diagnostics physics_us_per_step, mean. The controller decides on'
+        ' the state just received, i.e. right after a tick, so the command waits almost one'
+        ' publication period for the next tick: at 100 Hz the latency is about one period plus'
+        ' transport; at 500 and 1000 Hz transport and the queue of state messages both processes'
+        ' work through dominate. The cost per step grows at high rates because the batches get'
+        ' short (10 steps at 1000 Hz, 100 at 100 Hz) and the per-call overhead of Simulation.step'
+        ' is shared by fewer steps; on 2 cores the 1000 Hz stream is bounded by Python/DDS'
+        ' publishing in sim_node and receiving in the controller, not by the physics.\n'
+    )
     text = header + '\n' + table(results, args.real_time_factor) + '\n' + legend
     print(text)
     if not args.no_write:

@@ -1,4 +1,5 @@
-"""Benchmark (not a test): speed-accuracy trade of the lumped model's integrators.
+"""
+Benchmark (not a test): speed-accuracy trade of the lumped model's integrators.
 
 Scenes escape (3 s) and pump_cycle (10 s, the routine's command sequence recorded once at 100 Hz
 from a fixed-step run and replayed open loop, so every integrator sees the same inputs). Outputs at
@@ -8,23 +9,24 @@ call per constant-command segment with dense output at the publication times
 (``LumpedModel.advance_dense``). Reference: adaptive at rtol 1e-12, atol 1e-15 (RK4 at dt = 1e-5 s
 is a row of the table, to cross-check it). Errors: peak speed over the 100 Hz outputs and the
 distance at the end, relative to the reference; energy-ledger closure at the end. Wall time: the
-best of 5 repetitions (compilation excluded), one core. Writes benchmarks/results/lumped_adaptive.md.
+best of 5 repetitions (compilation excluded), one core. Writes
+benchmarks/results/lumped_adaptive.md.
 
     .venv/bin/python benchmarks/bench_lumped_adaptive.py
 """
+
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 import sys
 import time
-from pathlib import Path
-
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_common import header, write  # noqa: E402
+import numpy as np  # noqa: E402
 from pulsejet_sim.models import lumped_kernels as K  # noqa: E402
 from pulsejet_sim.models.base import SimulationBlowUp  # noqa: E402
 from pulsejet_sim.runner import Drive  # noqa: E402
@@ -35,7 +37,11 @@ DURATION = {'escape': 3.0, 'pump_cycle': 10.0}
 
 
 def schedule(scene_name: str):
-    """[(start_s, end_s, command)] of constant commands, from the scene's routine at 100 Hz."""
+    """
+    List the constant commands of the scene's routine at 100 Hz.
+
+    As [(start_s, end_s, command)].
+    """
     scene = load_scene(scene_name)
     cmds = [(start, cmd) for start, cmd, _ in Drive(scene, DURATION[scene_name])]
     segs = []
@@ -49,7 +55,7 @@ def schedule(scene_name: str):
 
 @functools.lru_cache(maxsize=None)
 def build(scene_name, integrator, dt, rtol, atol):
-    """The model, compiled once (scene loading is not part of the timing)."""
+    """Build the model, compiled once (scene loading is not part of the timing)."""
     sim = {'dt_s': dt, 'integrator': integrator, 'rtol': rtol, 'atol': atol}
     return load_scene(scene_name, {'simulation': sim}).model
 
@@ -85,7 +91,7 @@ def run_adaptive(scene_name, segs, rtol, atol):
 
 
 def timed(fn, *args, repeat=5):
-    fn(*args)   # compile / load
+    fn(*args)  # compile / load
     best = np.inf
     for _ in range(repeat):
         t = time.perf_counter()
@@ -102,35 +108,54 @@ def main() -> int:
         _, (m_ref, y_ref, u_ref, _) = timed(run_adaptive, scene_name, segs, 1e-12, 1e-15, repeat=1)
         peak_ref, dist_ref = u_ref.max(), y_ref[K.Y_X]
         cases = [('RK4', f'dt = {dt:g} s', run_rk4, (dt,)) for dt in (1e-5, 1e-4, 1e-3)]
-        cases += [('DP5(4) adaptive', f'rtol = {r:g}, atol = {r * 1e-3:g}', run_adaptive, (r, r * 1e-3))
-                  for r in (1e-3, 1e-4, 1e-5, 1e-6, 1e-8)]
+        cases += [
+            ('DP5(4) adaptive', f'rtol = {r:g}, atol = {r * 1e-3:g}', run_adaptive, (r, r * 1e-3))
+            for r in (1e-3, 1e-4, 1e-5, 1e-6, 1e-8)
+        ]
         for name, tol, fn, extra in cases:
             try:
-                wall, (model, y, u, steps) = timed(fn, scene_name, segs, *extra, repeat=1 if extra == (1e-5,) else 5)
+                wall, (model, y, u, steps) = timed(
+                    fn, scene_name, segs, *extra, repeat=1 if extra == (1e-5,) else 5
+                )
             except SimulationBlowUp as err:
-                rows.append(f'| {scene_name} | {name} | {tol} | fault: {str(err)[:90]}... | | | | | |')
+                rows.append(
+                    f'| {scene_name} | {name} | {tol} | fault: {str(err)[:90]}... | | | | | |'
+                )
                 continue
             e_peak = abs(u.max() - peak_ref) / abs(peak_ref)
             e_dist = abs(y[K.Y_X] - dist_ref) / abs(dist_ref)
-            closure = model.energy_ledger(y[:K.NY])['closure_error']
+            closure = model.energy_ledger(y[: K.NY])['closure_error']
             rtf = DURATION[scene_name] / wall
-            rows.append(f'| {scene_name} | {name} | {tol} | {steps:,} | {wall * 1e3:.3f} | {rtf:,.0f}x | '
-                        f'{e_peak:.1e} | {e_dist:.1e} | {closure:.1e} |')
+            rows.append(
+                f'| {scene_name} | {name} | {tol} | {steps:,} | {wall * 1e3:.3f} | {rtf:,.0f}x | '
+                f'{e_peak:.1e} | {e_dist:.1e} | {closure:.1e} |'
+            )
             if name.startswith('DP5') and e_peak <= 1e-3 and e_dist <= 1e-3 and rtf >= 1e4:
-                verdict.append(f'{scene_name}: {tol} meets the target ({rtf:,.0f}x real time, errors '
-                               f'{e_peak:.1e} / {e_dist:.1e})')
-        rows.append(f'| {scene_name} | reference: DP5(4) | rtol = 1e-12, atol = 1e-15 | | | | peak {peak_ref:.6f} m/s '
-                    f'| distance {dist_ref:.6f} m | |')
-    text = header('Lumped model: adaptive vs fixed-step integrator, speed and accuracy',
-                  'python benchmarks/bench_lumped_adaptive.py') + (
-        'Outputs at 100 Hz; escape 3 s with a constant command, pump_cycle 10 s with the routine\'s commands '
-        'replayed open loop (segments of constant command; the adaptive integrator restarts its step at each). '
-        'Steps: physics steps (RK4) or attempted steps, accepted + rejected (DP5). Wall: best of 5, one core. '
-        'Errors relative to the reference (last rows); closure: energy-ledger closure error at the end, J.\n\n'
-        '| scene | integrator | step / tolerance | steps | wall ms | real-time factor | peak speed error | '
-        'distance error | closure J |\n|---|---|---|---:|---:|---:|---:|---:|---:|\n' + '\n'.join(rows) + '\n\n'
-        'Target (issue 9): >= 1e4 x real time within 0.1 % of the reference peak speed and distance.\n\n'
-        + ('\n'.join(f'- {v}' for v in verdict) if verdict else '- not met in this run') + '\n')
+                verdict.append(
+                    f'{scene_name}: {tol} meets the target ({rtf:,.0f}x real time, errors '
+                    f'{e_peak:.1e} / {e_dist:.1e})'
+                )
+        rows.append(
+            f'| {scene_name} | reference: DP5(4) | rtol = 1e-12, atol = 1e-15 | | | | peak'
+            f' {peak_ref:.6f} m/s | distance {dist_ref:.6f} m | |'
+        )
+    text = header(
+        'Lumped model: adaptive vs fixed-step integrator, speed and accuracy',
+        'python benchmarks/bench_lumped_adaptive.py',
+    ) + (
+        'Outputs at 100 Hz; escape 3 s with a constant command, pump_cycle 10 s with the'
+        " routine's commands replayed open loop (segments of constant command; the adaptive"
+        ' integrator restarts its step at each). Steps: physics steps (RK4) or attempted steps,'
+        ' accepted + rejected (DP5). Wall: best of 5, one core. Errors relative to the reference'
+        ' (last rows); closure: energy-ledger closure error at the end, J.\n\n| scene | integrator'
+        ' | step / tolerance | steps | wall ms | real-time factor | peak speed error | distance'
+        ' error | closure J |\n|---|---|---|---:|---:|---:|---:|---:|---:|\n'
+        + '\n'.join(rows)
+        + '\n\nTarget (issue 9): >= 1e4 x real time within 0.1 % of the reference peak speed and'
+        ' distance.\n\n'
+        + ('\n'.join(f'- {v}' for v in verdict) if verdict else '- not met in this run')
+        + '\n'
+    )
     write('lumped_adaptive', text)
     return 0
 

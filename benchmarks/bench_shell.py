@@ -1,10 +1,11 @@
-"""Benchmark (not a test): speed against accuracy of the shell model (issue "Speed against accuracy").
+"""
+Benchmark (not a test): speed against accuracy of the shell model (issue "Speed against accuracy").
 
 Runs the default shell scene (config/shell_robot.yaml) over a grid of meshes (10 .. 160 elements,
 plus the scene's own 24), steps and integrators, for a fixed simulated duration, single-threaded,
-after an untimed warm-up compile.  Each run steps ``Simulation`` in 10 ms batches and observes after
-every batch (the 100 Hz stream the runner and sim_node publish; the observation cost is part of the
-timing).  From that stream:
+after an untimed warm-up compile.  Each run steps ``Simulation`` in 10 ms batches and observes
+after every batch (the 100 Hz stream the runner and sim_node publish; the observation cost is part
+of the timing).  From that stream:
 
 * peak speed        max of ``velocity_m_s``
 * volume amplitude  max - min of ``volume_m3`` after the first actuation period
@@ -15,70 +16,80 @@ cheapest setting (wall time per simulated second) within 1 % of it on all three 
 and compared with the scene's default; so is the cheapest *robust* one: within 1 % at its step and
 at every smaller step run with the same mesh and integrator (not within 1 % only because a time
 error happens to cancel the mesh error).  A 320-element run at the reference step estimates the
-reference's own mesh error (reported, not used for the selection).  ``verlet`` is run only at its own stable step and only where
-that fits the budget; at the grid's steps the scene refuses it (its message is quoted).
+reference's own mesh error (reported, not used for the selection).  ``verlet`` is run only at its
+own stable step and only where that fits the budget; at the grid's steps the scene refuses it (its
+message is quoted).
 
-In the same run, PyElastica 1.0 (PyPI; installed on demand into benchmarks/.venv/pyelastica, never a
-project requirement) simulates a 50-element Cosserat rod (benchmarks/elastica_rod.py), and the
+In the same run, PyElastica 1.0 (PyPI; installed on demand into benchmarks/.venv/pyelastica, never
+a project requirement) simulates a 50-element Cosserat rod (benchmarks/elastica_rod.py), and the
 cost per element-step of both is reported side by side.
 
 Writes benchmarks/results/shell_speed_accuracy.md (table) and .png (error against cost).
 
-    .venv/bin/python benchmarks/bench_shell.py            # full grid, ~10-15 min on 2 cores
-    .venv/bin/python benchmarks/bench_shell.py --quick    # ~3 min (coarser grid, reference 1.25e-4 s)
-    options: --duration S (simulated seconds per run, default 2.5 = 4 periods), --no-elastica, --no-plot
+    .venv/bin/python benchmarks/bench_shell.py          # full grid, ~10-15 min on 2 cores
+    .venv/bin/python benchmarks/bench_shell.py --quick  # ~3 min (coarser grid, ref. 1.25e-4 s)
+    options: --duration S (simulated seconds per run, default 2.5 = 4 periods), --no-elastica,
+             --no-plot
 """
+
 from __future__ import annotations
 
+import argparse
+from dataclasses import dataclass, field
+import datetime
+import json
+import math
 import os
+from pathlib import Path
+import platform
+import shlex
+import subprocess
+import sys
+import time
 
 # one core: every threaded library single-threaded (set before numpy/numba are imported)
 for _var in ('NUMBA_NUM_THREADS', 'OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(_var, '1')
-
-import argparse  # noqa: E402
-import datetime  # noqa: E402
-import json  # noqa: E402
-import math  # noqa: E402
-import platform  # noqa: E402
-import shlex  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from dataclasses import dataclass, field  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from pulsejet_sim.models.base import SimulationBlowUp  # noqa: E402
-from pulsejet_sim.scene import SceneError, load_scene  # noqa: E402
-from pulsejet_sim.simulation import Simulation  # noqa: E402
 from bench_common import cpu_model as _cpu_model  # noqa: E402
+import numpy as np  # noqa: E402
+from pulsejet_sim.models.base import SimulationBlowUp  # noqa: E402
+from pulsejet_sim.scene import load_scene, SceneError  # noqa: E402
+from pulsejet_sim.simulation import Simulation  # noqa: E402
 
 SCENE = 'shell_robot'
 RESULTS_MD = HERE / 'results' / 'shell_speed_accuracy.md'
 RESULTS_PNG = HERE / 'results' / 'shell_speed_accuracy.png'
-# under benchmarks/.venv/: git-ignored by the existing '.venv/' line and left out of the colcon-build test's copy
+# under benchmarks/.venv/: git-ignored by the existing '.venv/' line and left out of the
+# colcon-build test's copy
 ELASTICA_VENV = HERE / '.venv' / 'pyelastica'
 ELASTICA_REQ = 'pyelastica==1.0.*'
-SAMPLE_S = 0.01          # observation period (100 Hz)
-TOLERANCE = 0.01         # "within 1 %"
+SAMPLE_S = 0.01  # observation period (100 Hz)
+TOLERANCE = 0.01  # "within 1 %"
 IMPLICIT = ('implicit_midpoint', 'backward_euler')
 FIGURES = ('peak_speed', 'volume_amplitude', 'thrust_impulse')
 
 # every step divides the 10 ms observation period, so all runs are sampled at the same instants
 GRIDS = {
-    'full': dict(elements=(10, 20, 24, 40, 60, 80, 100, 120, 160),
-                 dts=(1e-2, 5e-3, 2.5e-3, 2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
-                 case_cap_s=120.0, budget_s=840.0, verlet_cap_s=60.0),
-    'quick': dict(elements=(10, 20, 24, 40, 80, 120, 160),
-                  dts=(5e-3, 2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4),
-                  case_cap_s=15.0, budget_s=150.0, verlet_cap_s=15.0),
+    'full': {
+        'elements': (10, 20, 24, 40, 60, 80, 100, 120, 160),
+        'dts': (1e-2, 5e-3, 2.5e-3, 2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
+        'case_cap_s': 120.0,
+        'budget_s': 840.0,
+        'verlet_cap_s': 60.0,
+    },
+    'quick': {
+        'elements': (10, 20, 24, 40, 80, 120, 160),
+        'dts': (5e-3, 2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4),
+        'case_cap_s': 15.0,
+        'budget_s': 150.0,
+        'verlet_cap_s': 15.0,
+    },
 }
 
 
@@ -87,10 +98,10 @@ class Case:
     integrator: str
     elements: int
     dt_s: float
-    status: str = 'ok'            # ok | refused | skipped | blow-up
+    status: str = 'ok'  # ok | refused | skipped | blow-up
     note: str = ''
     steps: int = 0
-    wall_s: float = math.nan      # best of the timed repetitions, whole run
+    wall_s: float = math.nan  # best of the timed repetitions, whole run
     repeats: int = 0
     substeps: int = 0
     figures: dict = field(default_factory=dict)
@@ -102,7 +113,7 @@ class Case:
 
     @property
     def cost(self) -> float:
-        """wall seconds per simulated second"""
+        """Wall seconds per simulated second."""
         return self.wall_s / (self.steps * self.dt_s) if self.steps else math.nan
 
     @property
@@ -121,12 +132,18 @@ def overrides(integrator: str, elements: int, dt_s: float) -> dict:
 def batch_steps(dt_s: float) -> int:
     n = int(round(SAMPLE_S / dt_s))
     if n < 1 or abs(n * dt_s - SAMPLE_S) > 1e-12:
-        raise ValueError(f'dt_s={dt_s:g} does not divide the {SAMPLE_S * 1e3:g} ms observation period')
+        raise ValueError(
+            f'dt_s={dt_s:g} does not divide the {SAMPLE_S * 1e3:g} ms observation period'
+        )
     return n
 
 
 def run_once(scene, duration_s: float):
-    """One timed run: (wall s, steps, arrays of t, speed, volume, thrust, substep events, fault)."""
+    """
+    Run once, timed.
+
+    Returns (wall s, steps, arrays of t, speed, volume, thrust, substep events, fault).
+    """
     model = scene.model
     sim = Simulation(model)
     batch = batch_steps(model.dt_s)
@@ -153,14 +170,20 @@ def run_once(scene, duration_s: float):
 def figures_of(series, period_s: float) -> dict:
     t, u, vol, thr = series
     after = t >= period_s - 1e-9
-    return {'peak_speed': float(np.max(u)),
-            'volume_amplitude': float(np.max(vol[after]) - np.min(vol[after])),
-            'thrust_impulse': float(np.sum(0.5 * (thr[1:] + thr[:-1]) * np.diff(t)))}
+    return {
+        'peak_speed': float(np.max(u)),
+        'volume_amplitude': float(np.max(vol[after]) - np.min(vol[after])),
+        'thrust_impulse': float(np.sum(0.5 * (thr[1:] + thr[:-1]) * np.diff(t))),
+    }
 
 
 def measure(case: Case, duration_s: float, min_timed_s: float = 1.5, max_repeats: int = 3) -> Case:
-    """Run the case; repeat the (deterministic) run while the total timed wall stays short, keep the
-    fastest wall time (least disturbed by other processes)."""
+    """
+    Run the case, keeping the fastest of its timed repetitions.
+
+    Run the case; repeat the (deterministic) run while the total timed wall stays short, keep the
+    fastest wall time (least disturbed by other processes).
+    """
     scene = load_scene(SCENE, overrides(case.integrator, case.elements, case.dt_s))
     period = 1.0 / float(scene.data['actuation']['frequency_hz'])
     wall, steps, series, subs, fault = run_once(scene, duration_s)
@@ -171,7 +194,9 @@ def measure(case: Case, duration_s: float, min_timed_s: float = 1.5, max_repeats
     case.figures = figures_of(series, period)
     total = wall
     while total < min_timed_s and case.repeats < max_repeats:
-        w2 = run_once(load_scene(SCENE, overrides(case.integrator, case.elements, case.dt_s)), duration_s)[0]
+        w2 = run_once(
+            load_scene(SCENE, overrides(case.integrator, case.elements, case.dt_s)), duration_s
+        )[0]
         case.wall_s = min(case.wall_s, w2)
         case.repeats += 1
         total += w2
@@ -179,9 +204,20 @@ def measure(case: Case, duration_s: float, min_timed_s: float = 1.5, max_repeats
 
 
 def is_robust(c: Case, cases: list[Case]) -> bool:
-    """Within the tolerance at its step and at every smaller step run with the same mesh and integrator."""
-    finer = [o for o in cases if o.integrator == c.integrator and o.elements == c.elements and o.dt_s < c.dt_s
-             and o.status in ('ok', 'blow-up')]   # skipped runs say nothing
+    """
+    Check the tolerance at the case's step and at every smaller step.
+
+    True when within the tolerance at its step and at every smaller step run with the same mesh
+    and integrator.
+    """
+    finer = [
+        o
+        for o in cases
+        if o.integrator == c.integrator
+        and o.elements == c.elements
+        and o.dt_s < c.dt_s
+        and o.status in ('ok', 'blow-up')
+    ]  # skipped runs say nothing
     return all(o.status == 'ok' and o.max_error <= TOLERANCE for o in finer)
 
 
@@ -205,15 +241,19 @@ def verlet_refusal(elements: int, dt_s: float) -> str | None:
 
 
 def verlet_step(elements: int) -> float:
-    """The largest step dividing 10 ms below the scene's explicit stable step."""
+    """Return the largest step dividing 10 ms below the scene's explicit stable step."""
     scene = load_scene(SCENE, {'mesh': {'elements': elements}})
     bound = scene.model.stable_step_s(scene.model.initial_state())
     return SAMPLE_S / math.ceil(SAMPLE_S / bound)
 
 
 class CostModel:
-    """Predicts a run's wall time from the ns per element-step measured so far with the same integrator
-    on the nearest mesh (the largest such rate: per-step overheads weigh more on small meshes)."""
+    """
+    Predicts a run's wall time from the rates measured so far.
+
+    The rate: the ns per element-step measured so far with the same integrator on the nearest mesh
+    (the largest such rate: per-step overheads weigh more on small meshes).
+    """
 
     def __init__(self):
         self.rate: dict[tuple[str, int], float] = {}
@@ -223,24 +263,36 @@ class CostModel:
             key = (case.integrator, case.elements)
             self.rate[key] = max(self.rate.get(key, 0.0), case.ns_per_element_step)
 
-    def predict(self, integrator: str, elements: int, dt_s: float, duration_s: float, default_ns: float) -> float:
+    def predict(
+        self, integrator: str, elements: int, dt_s: float, duration_s: float, default_ns: float
+    ) -> float:
         meshes = [n for (i, n) in self.rate if i == integrator]
         if meshes:
             near = min(meshes, key=lambda n: (abs(math.log(n / elements)), -n))
             ns = self.rate[(integrator, near)]
         else:
-            ns = self.rate.get(('implicit_midpoint', 160), default_ns) if integrator in IMPLICIT else default_ns
+            ns = (
+                self.rate.get(('implicit_midpoint', 160), default_ns)
+                if integrator in IMPLICIT
+                else default_ns
+            )
         return ns * 1e-9 * elements * duration_s / dt_s
 
 
 def ensure_elastica(log) -> Path:
     py = ELASTICA_VENV / 'bin' / 'python'
     if py.exists():
-        probe = subprocess.run([str(py), '-c', 'import importlib.metadata as m; print(m.version("pyelastica"))'],
-                               capture_output=True, text=True)
+        probe = subprocess.run(
+            [str(py), '-c', 'import importlib.metadata as m; print(m.version("pyelastica"))'],
+            capture_output=True,
+            text=True,
+        )
         if probe.returncode == 0 and probe.stdout.strip().startswith('1.0'):
             return py
-    log(f'creating {ELASTICA_VENV.relative_to(ROOT)} and installing {ELASTICA_REQ} (benchmark only) ...')
+    log(
+        f'creating {ELASTICA_VENV.relative_to(ROOT)} and installing {ELASTICA_REQ} (benchmark'
+        ' only) ...'
+    )
     base = getattr(sys, '_base_executable', None) or sys.executable
     subprocess.run([base, '-m', 'venv', str(ELASTICA_VENV)], check=True)
     subprocess.run([str(py), '-m', 'pip', 'install', '--quiet', ELASTICA_REQ], check=True)
@@ -252,8 +304,16 @@ def run_elastica(log, elements=50, dt_s=4e-5, duration_s=3.0) -> dict:
         py = ensure_elastica(log)
     except (subprocess.CalledProcessError, OSError) as err:
         return {'error': f'could not install {ELASTICA_REQ}: {err}'}
-    cmd = [str(py), str(HERE / 'elastica_rod.py'), '--elements', str(elements), '--dt', repr(dt_s),
-           '--duration', repr(duration_s)]
+    cmd = [
+        str(py),
+        str(HERE / 'elastica_rod.py'),
+        '--elements',
+        str(elements),
+        '--dt',
+        repr(dt_s),
+        '--duration',
+        repr(duration_s),
+    ]
     log('running ' + ' '.join(shlex.quote(c) for c in cmd))
     env = dict(os.environ, NUMBA_NUM_THREADS='1', OMP_NUM_THREADS='1', OPENBLAS_NUM_THREADS='1')
     try:
@@ -269,8 +329,14 @@ def run_elastica(log, elements=50, dt_s=4e-5, duration_s=3.0) -> dict:
     return out
 
 
-def kernel_only(elements: int, dt_s: float, integrator: str, duration_s: float, repeats: int = 5) -> float:
-    """Wall seconds of one Simulation.step call over the whole duration (no observations), best of N."""
+def kernel_only(
+    elements: int, dt_s: float, integrator: str, duration_s: float, repeats: int = 5
+) -> float:
+    """
+    Time one Simulation.step call over the whole duration, best of N.
+
+    Returns wall seconds (no observations).
+    """
     best = math.inf
     for _ in range(repeats):
         sim = Simulation(load_scene(SCENE, overrides(integrator, elements, dt_s)).model)
@@ -281,7 +347,7 @@ def kernel_only(elements: int, dt_s: float, integrator: str, duration_s: float, 
     return best
 
 
-# ---------------------------------------------------------------------------------------------- report
+# ------------------------------------------------------------------------------------------ report
 def fmt_dt(dt: float) -> str:
     return f'{dt:.3g}'
 
@@ -292,13 +358,21 @@ def fmt_pct(x: float) -> str:
     return f'{100 * x:.2g} %' if x >= 1e-4 else f'{100 * x:.1e} %'
 
 
-def table(cases: list[Case], ref: Case, best: Case | None, robust: Case | None, default_key) -> str:
-    head = ('| integrator | elements | dt (s) | steps | wall s / sim s | real-time x | ns / element-step '
-            '| peak speed (m/s) | vol. ampl. (ml) | impulse (mN s) | err speed | err vol. | err impulse | max err | note |\n'
-            '|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n')
+def table(
+    cases: list[Case], ref: Case, best: Case | None, robust: Case | None, default_key
+) -> str:
+    head = (
+        '| integrator | elements | dt (s) | steps | wall s / sim s | real-time x | ns /'
+        ' element-step | peak speed (m/s) | vol. ampl. (ml) | impulse (mN s) | err speed | err'
+        ' vol. | err impulse | max err | note'
+        ' |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n'
+    )
     rows = []
     order = {'implicit_midpoint': 0, 'backward_euler': 1, 'verlet': 2}
-    for c in sorted(cases, key=lambda c: (order.get(c.integrator, 9), c.elements, c.status == 'refused', -c.dt_s)):
+    for c in sorted(
+        cases,
+        key=lambda c: (order.get(c.integrator, 9), c.elements, c.status == 'refused', -c.dt_s),
+    ):
         notes = []
         if c.key == ref.key:
             notes.append('**reference**')
@@ -308,9 +382,18 @@ def table(cases: list[Case], ref: Case, best: Case | None, robust: Case | None, 
             notes.append('**cheapest robustly within 1 %**')
         if c.key == default_key:
             notes.append('**current default**')
-        if c.status == 'ok' and c.key != ref.key and c.max_error <= TOLERANCE and not (
-                (best is not None and c.key == best.key) or (robust is not None and c.key == robust.key)):
-            notes.append('within 1 %' if is_robust(c, cases) else 'within 1 % (not at smaller steps)')
+        if (
+            c.status == 'ok'
+            and c.key != ref.key
+            and c.max_error <= TOLERANCE
+            and not (
+                (best is not None and c.key == best.key)
+                or (robust is not None and c.key == robust.key)
+            )
+        ):
+            notes.append(
+                'within 1 %' if is_robust(c, cases) else 'within 1 % (not at smaller steps)'
+            )
         if c.status != 'ok':
             notes.append(f'{c.status}: {c.note}')
         elif c.note:
@@ -321,21 +404,38 @@ def table(cases: list[Case], ref: Case, best: Case | None, robust: Case | None, 
         if c.status in ('ok', 'blow-up') and c.steps:
             f = c.figures
             rows.append(
-                f'| {c.integrator} | {c.elements} | {fmt_dt(c.dt_s)} | {c.steps} | {c.cost:.3g} | {1 / c.cost:.3g} | '
-                f'{c.ns_per_element_step:.0f} | '
-                + (f'{f["peak_speed"]:.5f} | {f["volume_amplitude"] * 1e6:.3f} | {f["thrust_impulse"] * 1e3:.3f} | '
-                   f'{fmt_pct(c.errors["peak_speed"])} | {fmt_pct(c.errors["volume_amplitude"])} | '
-                   f'{fmt_pct(c.errors["thrust_impulse"])} | {fmt_pct(c.max_error)} | ' if f else '- | - | - | - | - | - | - | ')
-                + f'{note} |\n')
+                f'| {c.integrator} | {c.elements} | {fmt_dt(c.dt_s)} | {c.steps} | {c.cost:.3g} |'
+                f' {1 / c.cost:.3g} | {c.ns_per_element_step:.0f} | '
+                + (
+                    f'{f["peak_speed"]:.5f} | {f["volume_amplitude"] * 1e6:.3f} |'
+                    f' {f["thrust_impulse"] * 1e3:.3f} | {fmt_pct(c.errors["peak_speed"])} |'
+                    f' {fmt_pct(c.errors["volume_amplitude"])} |'
+                    f' {fmt_pct(c.errors["thrust_impulse"])} | {fmt_pct(c.max_error)} | '
+                    if f
+                    else '- | - | - | - | - | - | - | '
+                )
+                + f'{note} |\n'
+            )
         else:
             dt_txt = 'grid' if c.status == 'refused' else fmt_dt(c.dt_s)
-            rows.append(f'| {c.integrator} | {c.elements} | {dt_txt} | - | - | - | - | - | - | - | - | - | - | - | {note} |\n')
+            rows.append(
+                f'| {c.integrator} | {c.elements} | {dt_txt} | - | - | - | - | - | - | - | - | - |'
+                f' - | - | {note} |\n'
+            )
     return head + ''.join(rows)
 
 
-def plot(cases: list[Case], ref: Case, best: Case | None, robust: Case | None, default_key, path: Path,
-         title: str) -> None:
+def plot(
+    cases: list[Case],
+    ref: Case,
+    best: Case | None,
+    robust: Case | None,
+    default_key,
+    path: Path,
+    title: str,
+) -> None:
     import matplotlib
+
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
@@ -346,23 +446,54 @@ def plot(cases: list[Case], ref: Case, best: Case | None, robust: Case | None, d
     marker = {'implicit_midpoint': 'o', 'backward_euler': 's', 'verlet': '^'}
     floor = 1e-7
     fig, axes = plt.subplots(2, 2, figsize=(12, 9), sharex=True)
-    panels = [('max_error', 'max of the three relative errors')] + [(f, f.replace('_', ' ')) for f in FIGURES]
+    panels = [('max_error', 'max of the three relative errors')] + [
+        (f, f.replace('_', ' ')) for f in FIGURES
+    ]
     for ax, (fig_key, label) in zip(axes.flat, panels):
         for integ in marker:
             for n in elements:
-                sel = sorted((c for c in ok if c.integrator == integ and c.elements == n), key=lambda c: c.dt_s)
+                sel = sorted(
+                    (c for c in ok if c.integrator == integ and c.elements == n),
+                    key=lambda c: c.dt_s,
+                )
                 if not sel:
                     continue
                 x = [c.cost for c in sel]
-                y = [max(floor, c.max_error if fig_key == 'max_error' else c.errors[fig_key]) for c in sel]
-                ax.plot(x, y, marker=marker[integ], color=colour[n], lw=0.8,
-                        ls='-' if integ == 'implicit_midpoint' else '--' if integ == 'backward_euler' else ':',
-                        ms=5, mfc=colour[n] if integ != 'backward_euler' else 'none')
-        for c, style, lab in ((best, dict(marker='*', s=260, facecolor='none', edgecolor='red', lw=1.5), 'cheapest within 1 %'),
-                              (robust, dict(marker='o', s=200, facecolor='none', edgecolor='magenta', lw=1.5),
-                               'cheapest robustly within 1 %'),
-                              (next((c for c in ok if c.key == default_key), None),
-                               dict(marker='D', s=130, facecolor='none', edgecolor='black', lw=1.5), 'current default')):
+                y = [
+                    max(floor, c.max_error if fig_key == 'max_error' else c.errors[fig_key])
+                    for c in sel
+                ]
+                ax.plot(
+                    x,
+                    y,
+                    marker=marker[integ],
+                    color=colour[n],
+                    lw=0.8,
+                    ls=(
+                        '-'
+                        if integ == 'implicit_midpoint'
+                        else '--' if integ == 'backward_euler' else ':'
+                    ),
+                    ms=5,
+                    mfc=colour[n] if integ != 'backward_euler' else 'none',
+                )
+        for c, style, lab in (
+            (
+                best,
+                {'marker': '*', 's': 260, 'facecolor': 'none', 'edgecolor': 'red', 'lw': 1.5},
+                'cheapest within 1 %',
+            ),
+            (
+                robust,
+                {'marker': 'o', 's': 200, 'facecolor': 'none', 'edgecolor': 'magenta', 'lw': 1.5},
+                'cheapest robustly within 1 %',
+            ),
+            (
+                next((c for c in ok if c.key == default_key), None),
+                {'marker': 'D', 's': 130, 'facecolor': 'none', 'edgecolor': 'black', 'lw': 1.5},
+                'current default',
+            ),
+        ):
             if c is not None and c.errors:
                 y = c.max_error if fig_key == 'max_error' else c.errors[fig_key]
                 ax.scatter([c.cost], [max(floor, y)], zorder=5, label=lab, **style)
@@ -377,15 +508,41 @@ def plot(cases: list[Case], ref: Case, best: Case | None, robust: Case | None, d
     for ax in axes[:, 0]:
         ax.set_ylabel('relative error against the reference')
     from matplotlib.lines import Line2D
-    handles = [Line2D([], [], color=colour[n], marker='o', lw=0, label=f'{n} elements') for n in elements]
-    handles += [Line2D([], [], color='k', marker=m, ls={'implicit_midpoint': '-', 'backward_euler': '--', 'verlet': ':'}[i],
-                       mfc='k' if i != 'backward_euler' else 'none', label=i) for i, m in marker.items()
-                if any(c.integrator == i for c in ok)]
-    handles += [Line2D([], [], color='red', ls='--', label='1 % tolerance'),
-                Line2D([], [], color='grey', ls=':', label='10x real time'),
-                Line2D([], [], marker='*', color='red', mfc='none', lw=0, ms=14, label='cheapest within 1 %'),
-                Line2D([], [], marker='o', color='magenta', mfc='none', lw=0, ms=12, label='cheapest robustly within 1 %'),
-                Line2D([], [], marker='D', color='k', mfc='none', lw=0, ms=9, label='current default')]
+
+    handles = [
+        Line2D([], [], color=colour[n], marker='o', lw=0, label=f'{n} elements') for n in elements
+    ]
+    handles += [
+        Line2D(
+            [],
+            [],
+            color='k',
+            marker=m,
+            ls={'implicit_midpoint': '-', 'backward_euler': '--', 'verlet': ':'}[i],
+            mfc='k' if i != 'backward_euler' else 'none',
+            label=i,
+        )
+        for i, m in marker.items()
+        if any(c.integrator == i for c in ok)
+    ]
+    handles += [
+        Line2D([], [], color='red', ls='--', label='1 % tolerance'),
+        Line2D([], [], color='grey', ls=':', label='10x real time'),
+        Line2D(
+            [], [], marker='*', color='red', mfc='none', lw=0, ms=14, label='cheapest within 1 %'
+        ),
+        Line2D(
+            [],
+            [],
+            marker='o',
+            color='magenta',
+            mfc='none',
+            lw=0,
+            ms=12,
+            label='cheapest robustly within 1 %',
+        ),
+        Line2D([], [], marker='D', color='k', mfc='none', lw=0, ms=9, label='current default'),
+    ]
     fig.legend(handles=handles, loc='lower center', ncol=6, fontsize=8, frameon=False)
     fig.suptitle(title, fontsize=11)
     fig.tight_layout(rect=(0, 0.06, 1, 0.96))
@@ -394,19 +551,32 @@ def plot(cases: list[Case], ref: Case, best: Case | None, robust: Case | None, d
     plt.close(fig)
 
 
-# ---------------------------------------------------------------------------------------------- main
+# -------------------------------------------------------------------------------------------- main
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument('--quick', action='store_true', help='coarser grid and budget (~3 min)')
-    ap.add_argument('--duration', type=float, default=2.5,
-                    help='simulated seconds per run (default 2.5 = 4 actuation periods, so the impulse window '
-                         'ends between two jets)')
+    ap.add_argument(
+        '--duration',
+        type=float,
+        default=2.5,
+        help=(
+            'simulated seconds per run (default 2.5 = 4 actuation periods, so the impulse window '
+            'ends between two jets)'
+        ),
+    )
     ap.add_argument('--no-elastica', action='store_true', help='skip the PyElastica comparison')
     ap.add_argument('--no-plot', action='store_true')
-    ap.add_argument('--out', type=Path, default=RESULTS_MD, help='markdown output (the PNG goes beside it)')
+    ap.add_argument(
+        '--out', type=Path, default=RESULTS_MD, help='markdown output (the PNG goes beside it)'
+    )
     args = ap.parse_args(argv)
     if not (math.isfinite(args.duration) and args.duration >= 1.0):
-        ap.error(f'--duration {args.duration!r} rejected; allowed: >= 1 s (a first period plus some more)')
+        ap.error(
+            f'--duration {args.duration!r} rejected; allowed: >= 1 s (a first period plus some'
+            ' more)'
+        )
     mode = 'quick' if args.quick else 'full'
     grid = GRIDS[mode]
     duration = round(args.duration / SAMPLE_S) * SAMPLE_S
@@ -418,43 +588,62 @@ def main(argv=None) -> int:
 
     default_scene = load_scene(SCENE)
     d_sim = default_scene.data['simulation']
-    default_key = (d_sim.get('integrator', 'implicit_midpoint'), int(default_scene.data['mesh']['elements']),
-                   float(d_sim['dt_s']))
+    default_key = (
+        d_sim.get('integrator', 'implicit_midpoint'),
+        int(default_scene.data['mesh']['elements']),
+        float(d_sim['dt_s']),
+    )
     compile_s = warm_up()
     log(f'warm-up (compile / cache load) {compile_s:.1f} s')
 
     elements = sorted(set(grid['elements']) | {default_key[1]})
     dts = sorted(set(grid['dts']) | {default_key[2]}, reverse=True)
     ref = Case('implicit_midpoint', max(elements), min(dts))
-    log(f'reference: {ref.integrator}, {ref.elements} elements, dt {ref.dt_s:g} s, {duration:g} s simulated')
+    log(
+        f'reference: {ref.integrator}, {ref.elements} elements, dt {ref.dt_s:g} s, {duration:g} s'
+        ' simulated'
+    )
     measure(ref, duration, min_timed_s=0.0)
     if ref.status != 'ok':
         print(f'reference run failed: {ref.note}', file=sys.stderr)
         return 1
-    ref.errors = {k: 0.0 for k in FIGURES}
+    ref.errors = dict.fromkeys(FIGURES, 0.0)
     log(f'reference done: {ref.wall_s:.1f} s wall, figures {ref.figures}')
     costs = CostModel()
     costs.add(ref)
     spent = ref.wall_s
 
-    todo = [Case(i, n, dt) for i in IMPLICIT for n in elements for dt in dts if (i, n, dt) != ref.key]
+    todo = [
+        Case(i, n, dt) for i in IMPLICIT for n in elements for dt in dts if (i, n, dt) != ref.key
+    ]
     todo.sort(key=lambda c: c.elements / c.dt_s)
     done: list[Case] = [ref]
     for c in todo:
         est = costs.predict(c.integrator, c.elements, c.dt_s, duration, default_ns=3000.0)
         elapsed = time.perf_counter() - t_start
         if est > grid['case_cap_s']:
-            c.status, c.note = 'skipped', f'estimated {est:.0f} s > {grid["case_cap_s"]:g} s per-run cap'
+            c.status, c.note = (
+                'skipped',
+                f'estimated {est:.0f} s > {grid["case_cap_s"]:g} s per-run cap',
+            )
         elif elapsed + est > grid['budget_s']:
-            c.status, c.note = 'skipped', f'estimated {est:.0f} s would exceed the {grid["budget_s"]:g} s budget'
+            c.status, c.note = (
+                'skipped',
+                f'estimated {est:.0f} s would exceed the {grid["budget_s"]:g} s budget',
+            )
         else:
             measure(c, duration)
             costs.add(c)
             spent += c.wall_s * c.repeats
         done.append(c)
         if c.status == 'ok':
-            c.errors = {k: abs(c.figures[k] - ref.figures[k]) / abs(ref.figures[k]) for k in FIGURES}
-            log(f'{c.integrator:17s} {c.elements:4d} el dt {c.dt_s:<8g} {c.cost:8.4f} s/s  max err {fmt_pct(c.max_error)}')
+            c.errors = {
+                k: abs(c.figures[k] - ref.figures[k]) / abs(ref.figures[k]) for k in FIGURES
+            }
+            log(
+                f'{c.integrator:17s} {c.elements:4d} el dt {c.dt_s:<8g} {c.cost:8.4f} s/s  max err'
+                f' {fmt_pct(c.max_error)}'
+            )
         else:
             log(f'{c.integrator:17s} {c.elements:4d} el dt {c.dt_s:<8g} {c.status}: {c.note[:90]}')
 
@@ -465,28 +654,45 @@ def main(argv=None) -> int:
         c = Case('verlet', n, max(dts))
         msg = verlet_refusal(n, max(dts))
         c.status = 'refused'
-        c.note = (f'at every grid step {fmt_dt(min(dts))}..{fmt_dt(max(dts))} s' if msg else 'unexpectedly accepted')
+        c.note = (
+            f'at every grid step {fmt_dt(min(dts))}..{fmt_dt(max(dts))} s'
+            if msg
+            else 'unexpectedly accepted'
+        )
         verlet_cases.append(c)
         dt_v = verlet_step(n)
         cv = Case('verlet', n, dt_v)
         est = costs.predict('verlet', n, dt_v, duration, default_ns=700.0)
         elapsed = time.perf_counter() - t_start
         if est > grid['verlet_cap_s']:
-            cv.status, cv.note = 'skipped', f'at its stable step: estimated {est:.0f} s > {grid["verlet_cap_s"]:g} s cap'
+            cv.status, cv.note = (
+                'skipped',
+                f'at its stable step: estimated {est:.0f} s > {grid["verlet_cap_s"]:g} s cap',
+            )
         elif elapsed + est > grid['budget_s'] + 60:
-            cv.status, cv.note = 'skipped', f'at its stable step: estimated {est:.0f} s would exceed the budget'
+            cv.status, cv.note = (
+                'skipped',
+                f'at its stable step: estimated {est:.0f} s would exceed the budget',
+            )
         else:
             log(f'verlet {n} el at its stable step {dt_v:.3g} s (estimated {est:.0f} s)')
             measure(cv, duration, min_timed_s=0.0)
             costs.add(cv)
             cv.note = cv.note or 'at its stable step (explicit)'
         if cv.status == 'ok':
-            cv.errors = {k: abs(cv.figures[k] - ref.figures[k]) / abs(ref.figures[k]) for k in FIGURES}
-            log(f'verlet            {n:4d} el dt {dt_v:<8.3g} {cv.cost:8.3f} s/s  max err {fmt_pct(cv.max_error)}')
+            cv.errors = {
+                k: abs(cv.figures[k] - ref.figures[k]) / abs(ref.figures[k]) for k in FIGURES
+            }
+            log(
+                f'verlet            {n:4d} el dt {dt_v:<8.3g} {cv.cost:8.3f} s/s  max err'
+                f' {fmt_pct(cv.max_error)}'
+            )
         verlet_cases.append(cv)
     done += verlet_cases
 
-    within = [c for c in done if c.status == 'ok' and c.key != ref.key and c.max_error <= TOLERANCE]
+    within = [
+        c for c in done if c.status == 'ok' and c.key != ref.key and c.max_error <= TOLERANCE
+    ]
     best = min(within, key=lambda c: c.cost) if within else None
     robust_set = [c for c in within if is_robust(c, done)]
     robust = min(robust_set, key=lambda c: c.cost) if robust_set else None
@@ -496,11 +702,24 @@ def main(argv=None) -> int:
     check_elements = 2 * ref.elements
     est = costs.predict('implicit_midpoint', check_elements, ref.dt_s, duration, default_ns=3000.0)
     if est <= grid['case_cap_s'] * 1.5:
-        log(f'mesh check of the reference: {check_elements} elements, dt {ref.dt_s:g} s (estimated {est:.0f} s)')
-        check = measure(Case('implicit_midpoint', check_elements, ref.dt_s, note='mesh check of the reference '
-                             '(not in the selection)'), duration, min_timed_s=0.0)
+        log(
+            f'mesh check of the reference: {check_elements} elements, dt {ref.dt_s:g} s (estimated'
+            f' {est:.0f} s)'
+        )
+        check = measure(
+            Case(
+                'implicit_midpoint',
+                check_elements,
+                ref.dt_s,
+                note='mesh check of the reference (not in the selection)',
+            ),
+            duration,
+            min_timed_s=0.0,
+        )
         if check.status == 'ok':
-            check.errors = {k: abs(check.figures[k] - ref.figures[k]) / abs(ref.figures[k]) for k in FIGURES}
+            check.errors = {
+                k: abs(check.figures[k] - ref.figures[k]) / abs(ref.figures[k]) for k in FIGURES
+            }
             log(f'{check_elements} el differs from the reference by {fmt_pct(check.max_error)}')
 
     log('default scene, kernel only (one Simulation.step call, no observations)')
@@ -522,75 +741,117 @@ def main(argv=None) -> int:
     total_s = time.perf_counter() - t_start
     load_end = os.getloadavg()
     now = datetime.datetime.now(datetime.timezone.utc)
-    cmd = 'benchmarks/bench_shell.py' + (' ' + ' '.join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:])) if (argv if argv is not None else sys.argv[1:]) else '')
+    cmd = 'benchmarks/bench_shell.py' + (
+        ' ' + ' '.join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
+        if (argv if argv is not None else sys.argv[1:])
+        else ''
+    )
     import numba
+
     header = (
-        f'# Shell model: speed against accuracy\n\n'
-        f'Produced by `benchmarks/bench_shell.py` ({mode} grid). {now:%Y-%m-%d %H:%M} UTC; '
-        f'nproc {os.cpu_count()}, {platform.machine()} {_cpu_model()}; Python {platform.python_version()}, '
-        f'numpy {np.__version__}, numba {numba.__version__}; command: `{cmd}`; '
-        f'load average {load_start[0]:.2f} at the start, {load_end[0]:.2f} at the end; whole run {total_s / 60:.1f} min.\n\n'
-        f'Scene `config/{SCENE}.yaml` (cable-driven robot, 1.6 Hz) with `mesh.elements`, `simulation.dt_s` and '
-        f'`simulation.integrator` overridden; {duration:g} s simulated per run, single thread '
-        f'(NUMBA/OMP/OPENBLAS threads = 1), after an untimed warm-up (compile or numba-cache load, {compile_s:.1f} s). Each run steps '
-        f'`Simulation` in 10 ms batches and observes after each (the 100 Hz stream of the runner and sim_node; '
-        f'the observation cost is in the timing); wall time is the best of up to 3 identical runs. '
-        f'Figures from the 100 Hz stream: peak speed = max `velocity_m_s`; volume amplitude = max - min of '
-        f'`volume_m3` after the first period (t >= 0.625 s); thrust impulse = trapezoidal integral of `thrust_n`. '
-        f'Errors are relative to the reference run ({ref.integrator}, {ref.elements} elements, dt {ref.dt_s:g} s).\n\n')
+        f'# Shell model: speed against accuracy\n\nProduced by `benchmarks/bench_shell.py` ({mode}'
+        f' grid). {now:%Y-%m-%d %H:%M} UTC; nproc {os.cpu_count()}, {platform.machine()}'
+        f' {_cpu_model()}; Python {platform.python_version()}, numpy {np.__version__}, numba'
+        f' {numba.__version__}; command: `{cmd}`; load average {load_start[0]:.2f} at the start,'
+        f' {load_end[0]:.2f} at the end; whole run {total_s / 60:.1f} min.\n\nScene'
+        f' `config/{SCENE}.yaml` (cable-driven robot, 1.6 Hz) with `mesh.elements`,'
+        f' `simulation.dt_s` and `simulation.integrator` overridden; {duration:g} s simulated per'
+        ' run, single thread (NUMBA/OMP/OPENBLAS threads = 1), after an untimed warm-up (compile'
+        f' or numba-cache load, {compile_s:.1f} s). Each run steps `Simulation` in 10 ms batches'
+        ' and observes after each (the 100 Hz stream of the runner and sim_node; the observation'
+        ' cost is in the timing); wall time is the best of up to 3 identical runs. Figures from'
+        ' the 100 Hz stream: peak speed = max `velocity_m_s`; volume amplitude = max - min of'
+        ' `volume_m3` after the first period (t >= 0.625 s); thrust impulse = trapezoidal'
+        f' integral of `thrust_n`. Errors are relative to the reference run ({ref.integrator},'
+        f' {ref.elements} elements, dt {ref.dt_s:g} s).\n\n'
+    )
 
     def describe(c: Case, kern: float | None) -> str:
-        return (f'{c.integrator}, {c.elements} elements, dt {c.dt_s:g} s** - {c.cost:.4f} wall s per simulated s '
-                f'(**{1 / c.cost:.0f}x real time** on one core with 100 Hz observations'
-                + (f', {duration / kern:.0f}x kernel only' if kern else '')
-                + f'); errors: peak speed {fmt_pct(c.errors["peak_speed"])}, volume amplitude '
-                f'{fmt_pct(c.errors["volume_amplitude"])}, thrust impulse {fmt_pct(c.errors["thrust_impulse"])}')
+        return (
+            f'{c.integrator}, {c.elements} elements, dt {c.dt_s:g} s** - {c.cost:.4f} wall s per'
+            f' simulated s (**{1 / c.cost:.0f}x real time** on one core with 100 Hz observations'
+            + (f', {duration / kern:.0f}x kernel only' if kern else '')
+            + f'); errors: peak speed {fmt_pct(c.errors["peak_speed"])}, volume amplitude'
+            f' {fmt_pct(c.errors["volume_amplitude"])}, thrust impulse'
+            f' {fmt_pct(c.errors["thrust_impulse"])}'
+        )
 
     summary = ['## Result\n']
     if best is not None:
-        summary.append('- **Cheapest setting within 1 % of the reference on all three figures: '
-                       + describe(best, kern_of.get(best.key)) + '.')
+        summary.append(
+            '- **Cheapest setting within 1 % of the reference on all three figures: '
+            + describe(best, kern_of.get(best.key))
+            + '.'
+        )
     else:
         summary.append('- No setting other than the reference is within 1 % on all three figures.')
     if robust is not None and (best is None or robust.key != best.key):
-        summary.append('- **Cheapest setting robustly within 1 % (also within 1 % at every smaller step run with '
-                       'the same mesh and integrator): ' + describe(robust, kern_of.get(robust.key)) + '.')
+        summary.append(
+            '- **Cheapest setting robustly within 1 % (also within 1 % at every smaller step run'
+            ' with the same mesh and integrator): '
+            + describe(robust, kern_of.get(robust.key))
+            + '.'
+        )
         if best is not None:
-            finer = [o for o in done if o.integrator == best.integrator and o.elements == best.elements
-                     and o.dt_s < best.dt_s and o.status == 'ok']
+            finer = [
+                o
+                for o in done
+                if o.integrator == best.integrator
+                and o.elements == best.elements
+                and o.dt_s < best.dt_s
+                and o.status == 'ok'
+            ]
             worst = max(finer, key=lambda o: o.max_error) if finer else None
             summary.append(
-                f'  The strict winner ({best.integrator}, {best.elements} elements) is within 1 % only at its coarse '
-                f'step: at dt {worst.dt_s:g} s the same mesh is {fmt_pct(worst.max_error)} off, i.e. its time error '
-                f'cancels part of its mesh error' if worst is not None else '  ')
-    dflag = ('within 1 %' if default.status == 'ok' and default.max_error <= TOLERANCE else 'NOT within 1 %')
+                f'  The strict winner ({best.integrator}, {best.elements} elements) is within 1 %'
+                f' only at its coarse step: at dt {worst.dt_s:g} s the same mesh is'
+                f' {fmt_pct(worst.max_error)} off, i.e. its time error cancels part of its mesh'
+                ' error'
+                if worst is not None
+                else '  '
+            )
+    dflag = (
+        'within 1 %'
+        if default.status == 'ok' and default.max_error <= TOLERANCE
+        else 'NOT within 1 %'
+    )
     summary.append(
-        f'- Current default ({default_key[0]}, {default_key[1]} elements, dt {default_key[2]:g} s): '
-        f'{default.cost:.4f} wall s per simulated s = **{1 / default.cost:.0f}x real time** on one core with 100 Hz '
-        f'observations ({duration / kern_wall:.0f}x kernel only, {kern_ns:.0f} ns per element-step); errors: '
-        f'peak speed {fmt_pct(default.errors.get("peak_speed", math.nan))}, volume amplitude '
-        f'{fmt_pct(default.errors.get("volume_amplitude", math.nan))}, thrust impulse '
-        f'{fmt_pct(default.errors.get("thrust_impulse", math.nan))} -> {dflag}. Target >= 10x real time: '
-        f'{"met" if 1 / default.cost >= 10 else "NOT met"}.')
+        f'- Current default ({default_key[0]}, {default_key[1]} elements, dt {default_key[2]:g}'
+        f' s): {default.cost:.4f} wall s per simulated s = **{1 / default.cost:.0f}x real time**'
+        f' on one core with 100 Hz observations ({duration / kern_wall:.0f}x kernel only,'
+        f' {kern_ns:.0f} ns per element-step); errors: peak speed'
+        f' {fmt_pct(default.errors.get("peak_speed", math.nan))}, volume amplitude'
+        f' {fmt_pct(default.errors.get("volume_amplitude", math.nan))}, thrust impulse'
+        f' {fmt_pct(default.errors.get("thrust_impulse", math.nan))} -> {dflag}. Target >= 10x'
+        f' real time: {"met" if 1 / default.cost >= 10 else "NOT met"}.'
+    )
     rec = robust or best
     if rec is not None and rec.key != default_key:
-        summary.append(f'- Recommendation: make {rec.integrator}, {rec.elements} elements, dt {rec.dt_s:g} s the '
-                       f'default (`mesh.elements: {rec.elements}`, `simulation.dt_s: {rec.dt_s:g}`, '
-                       f'`simulation.integrator: {rec.integrator}`): {1 / rec.cost:.0f}x real time, target >= 10x '
-                       f'{"met" if 1 / rec.cost >= 10 else "NOT met"}.')
+        summary.append(
+            f'- Recommendation: make {rec.integrator}, {rec.elements} elements, dt {rec.dt_s:g} s'
+            f' the default (`mesh.elements: {rec.elements}`, `simulation.dt_s: {rec.dt_s:g}`,'
+            f' `simulation.integrator: {rec.integrator}`): {1 / rec.cost:.0f}x real time, target'
+            f' >= 10x {"met" if 1 / rec.cost >= 10 else "NOT met"}.'
+        )
     elif rec is not None:
         summary.append('- The current default is the cheapest setting within 1 %.')
     if check is not None and check.status == 'ok':
         summary.append(
-            f'- Reference check: {check.elements} elements at dt {check.dt_s:g} s differ from the {ref.elements}-element '
-            f'reference by {fmt_pct(check.errors["peak_speed"])} (peak speed), {fmt_pct(check.errors["volume_amplitude"])} '
-            f'(volume amplitude), {fmt_pct(check.errors["thrust_impulse"])} (impulse): the order of the reference\'s '
-            f'own mesh error, so "within 1 % of the finest run" is not "within 1 % of the converged answer".')
+            f'- Reference check: {check.elements} elements at dt {check.dt_s:g} s differ from the'
+            f' {ref.elements}-element reference by {fmt_pct(check.errors["peak_speed"])} (peak'
+            f' speed), {fmt_pct(check.errors["volume_amplitude"])} (volume amplitude),'
+            f' {fmt_pct(check.errors["thrust_impulse"])} (impulse): the order of the reference\'s'
+            ' own mesh error, so "within 1 % of the finest run" is not "within 1 % of the'
+            ' converged answer".'
+        )
     n_skipped = sum(c.status == 'skipped' for c in done)
     if n_skipped:
         summary.append(f'- {n_skipped} combinations were skipped for time (noted in the table).')
-    summary.append(f'- verlet: refused by the scene at every grid step; the message, e.g. for the default mesh: '
-                   f'"{refusal}". Where it fits the budget it is run at its own stable step instead (rows below).')
+    summary.append(
+        '- verlet: refused by the scene at every grid step; the message, e.g. for the default'
+        f' mesh: "{refusal}". Where it fits the budget it is run at its own stable step instead'
+        ' (rows below).'
+    )
     summary.append('')
 
     elastica = ['## PyElastica 1.0 side by side\n\n']
@@ -600,49 +861,74 @@ def main(argv=None) -> int:
         elastica.append(f'PyElastica run failed: {rod.get("error")}\n')
     else:
         elastica.append(
-            'Same run, same machine, one thread each. Rod: `benchmarks/elastica_rod.py` in the benchmark-only venv '
-            f'(`benchmarks/.venv/pyelastica`, pyelastica {rod.get("pyelastica_version")}): a straight Cosserat rod, '
-            f'{rod["elements"]} elements, E = 1 MPa, L = 0.2 m, r = 5 mm, rho = 1100 kg/m^3, clamped at one end '
-            f'(OneEndFixedBC), 2 mN tip force ramped over 0.1 s, AnalyticalLinearDamper, PositionVerlet at dt '
-            f'{rod["dt_s"]:g} s, {rod["simulated_s"]:.3g} s simulated after an untimed warm-up; static tip deflection '
-            f'{rod["tip_deflection_m"] * 1e3:.2f} mm (Euler-Bernoulli {rod["euler_bernoulli_deflection_m"] * 1e3:.2f} mm).\n\n'
-            '| | elements | dof / node | dt (s) | us / step | ns / element-step | wall s / sim s | real-time x |\n'
-            '|---|---:|---:|---:|---:|---:|---:|---:|\n'
-            f'| PyElastica 1.0 Cosserat rod, PositionVerlet (explicit) | {rod["elements"]} | 6 (+ directors) | {rod["dt_s"]:g} | '
-            f'{rod["us_per_step"]:.1f} | {rod["ns_per_element_step"]:.0f} | {rod["wall_per_sim_s"]:.3g} | {rod["real_time_factor"]:.3g} |\n'
-            f'| pulsejet shell, default scene, {default_key[0]} (kernel only) | {default_key[1]} | 3 | {default_key[2]:g} | '
-            f'{kern_wall / default_steps * 1e6:.1f} | {kern_ns:.0f} | {kern_wall / duration:.3g} | {duration / kern_wall:.3g} |\n'
-            f'| pulsejet shell, default scene, with 100 Hz observations | {default_key[1]} | 3 | {default_key[2]:g} | '
-            f'{default.wall_s / default.steps * 1e6:.1f} | {default.ns_per_element_step:.0f} | {default.cost:.3g} | {1 / default.cost:.3g} |\n')
+            'Same run, same machine, one thread each. Rod: `benchmarks/elastica_rod.py` in the'
+            ' benchmark-only venv (`benchmarks/.venv/pyelastica`, pyelastica'
+            f' {rod.get("pyelastica_version")}): a straight Cosserat rod, {rod["elements"]}'
+            ' elements, E = 1 MPa, L = 0.2 m, r = 5 mm, rho = 1100 kg/m^3, clamped at one end'
+            ' (OneEndFixedBC), 2 mN tip force ramped over 0.1 s, AnalyticalLinearDamper,'
+            f' PositionVerlet at dt {rod["dt_s"]:g} s, {rod["simulated_s"]:.3g} s simulated after'
+            f' an untimed warm-up; static tip deflection {rod["tip_deflection_m"] * 1e3:.2f} mm'
+            f' (Euler-Bernoulli {rod["euler_bernoulli_deflection_m"] * 1e3:.2f} mm).\n\n| |'
+            ' elements | dof / node | dt (s) | us / step | ns / element-step | wall s / sim s |'
+            ' real-time x |\n|---|---:|---:|---:|---:|---:|---:|---:|\n| PyElastica 1.0 Cosserat'
+            f' rod, PositionVerlet (explicit) | {rod["elements"]} | 6 (+ directors) |'
+            f' {rod["dt_s"]:g} | {rod["us_per_step"]:.1f} | {rod["ns_per_element_step"]:.0f} |'
+            f' {rod["wall_per_sim_s"]:.3g} | {rod["real_time_factor"]:.3g} |\n| pulsejet shell,'
+            f' default scene, {default_key[0]} (kernel only) | {default_key[1]} | 3 |'
+            f' {default_key[2]:g} | {kern_wall / default_steps * 1e6:.1f} | {kern_ns:.0f} |'
+            f' {kern_wall / duration:.3g} | {duration / kern_wall:.3g} |\n| pulsejet shell,'
+            f' default scene, with 100 Hz observations | {default_key[1]} | 3 | {default_key[2]:g}'
+            f' | {default.wall_s / default.steps * 1e6:.1f} | {default.ns_per_element_step:.0f} |'
+            f' {default.cost:.3g} | {1 / default.cost:.3g} |\n'
+        )
         if rec is not None and rec.key != default_key:
             kw = kern_of[rec.key]
             n_rec = int(round(duration / rec.dt_s))
             elastica.append(
-                f'| pulsejet shell, recommended ({rec.integrator}, dt {rec.dt_s:g}), kernel only | '
-                f'{rec.elements} | 3 | {rec.dt_s:g} | {kw / n_rec * 1e6:.1f} | {kw / (n_rec * rec.elements) * 1e9:.0f} | '
-                f'{kw / duration:.3g} | {duration / kw:.3g} |\n')
+                f'| pulsejet shell, recommended ({rec.integrator}, dt {rec.dt_s:g}), kernel only |'
+                f' {rec.elements} | 3 | {rec.dt_s:g} | {kw / n_rec * 1e6:.1f} |'
+                f' {kw / (n_rec * rec.elements) * 1e9:.0f} | {kw / duration:.3g} |'
+                f' {duration / kw:.3g} |\n'
+            )
         elastica.append(
-            '\nCaveat: not like for like. The rod is explicit: each step is one cheap force evaluation, but '
-            'its stable step is set by the element-scale axial/shear waves (tens of microseconds here). The shell '
-            'is implicit (midpoint or backward Euler) with a (modified) Newton solve on a banded Jacobian per '
-            'step, so one element-step costs more, but it takes steps of milliseconds that the explicit scheme '
-            'cannot (the shell\'s own verlet needs ~1.3 us for the robot\'s Kelvin-Voigt viscosity). The '
-            'meaningful comparison is wall time per simulated second at the accuracy needed, not per '
-            'element-step. The rod is 3-D with 6 dof per node plus directors; the axisymmetric shell has '
-            '3 dof per node and also carries the fluid, jet and vehicle terms.\n')
+            '\nCaveat: not like for like. The rod is explicit: each step is one cheap force'
+            ' evaluation, but its stable step is set by the element-scale axial/shear waves (tens'
+            ' of microseconds here). The shell is implicit (midpoint or backward Euler) with a'
+            ' (modified) Newton solve on a banded Jacobian per step, so one element-step costs'
+            ' more, but it takes steps of milliseconds that the explicit scheme cannot (the'
+            " shell's own verlet needs ~1.3 us for the robot's Kelvin-Voigt viscosity). The"
+            ' meaningful comparison is wall time per simulated second at the accuracy needed, not'
+            ' per element-step. The rod is 3-D with 6 dof per node plus directors; the'
+            ' axisymmetric shell has 3 dof per node and also carries the fluid, jet and vehicle'
+            ' terms.\n'
+        )
 
-    md = (header + '\n'.join(summary) + '\n' + ''.join(elastica) + '\n## All runs\n\nSorted by integrator, mesh, step (largest first). Costs are the best of up to 3 identical runs on a shared 2-core machine: expect ~10 % noise.\n\n'
-          + table(done + ([check] if check is not None else []), ref, best, robust, default_key)
-          + f'\n![error against cost]({RESULTS_PNG.name})\n')
+    md = (
+        header
+        + '\n'.join(summary)
+        + '\n'
+        + ''.join(elastica)
+        + '\n## All runs\n\nSorted by integrator, mesh, step (largest first). Costs are the best'
+        ' of up to 3 identical runs on a shared 2-core machine: expect ~10 % noise.\n\n'
+        + table(done + ([check] if check is not None else []), ref, best, robust, default_key)
+        + f'\n![error against cost]({RESULTS_PNG.name})\n'
+    )
     print(md)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(md)
     log(f'written {args.out}')
     if not args.no_plot:
         png = args.out.with_suffix('.png')
-        plot(done, ref, best, robust, default_key, png,
-             f'shell_robot: relative error against cost ({duration:g} s simulated, reference {ref.elements} el, '
-             f'dt {ref.dt_s:g} s, {ref.integrator}; {now:%Y-%m-%d})')
+        plot(
+            done,
+            ref,
+            best,
+            robust,
+            default_key,
+            png,
+            f'shell_robot: relative error against cost ({duration:g} s simulated, reference'
+            f' {ref.elements} el, dt {ref.dt_s:g} s, {ref.integrator}; {now:%Y-%m-%d})',
+        )
         log(f'written {png}')
     return 0
 

@@ -1,7 +1,9 @@
-"""Benchmark of the live sim_node: publication rate, period jitter and real-time factor held.
+"""
+Benchmark of the live sim_node: publication rate, period jitter and real-time factor held.
 
     .venv/bin/python benchmarks/bench_sim_node.py [--seconds 60] [--real-time-factor 1]
-                                                  [--publish-rate 0] [--scene pump_cycle] [--controller]
+                                                  [--publish-rate 0] [--scene pump_cycle]
+                                                  [--controller]
 
 Starts sim_node (and with --controller the controller_node, so the pump/valve cycle runs) as
 subprocesses in an isolated ROS domain with localhost discovery, subscribes to /clock in this
@@ -13,23 +15,23 @@ process and measures from receive times (time.monotonic):
 Prints a markdown table and appends it to benchmarks/results/sim_node.md with a header (date,
 nproc, python version). Not a test.
 """
+
 from __future__ import annotations
 
 import argparse
 import datetime as _dt
 import os
+from pathlib import Path
 import platform
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
-
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from pulsejet_sim.node_params import ros_value  # noqa: E402
 from live_common import cpu_seconds  # noqa: E402
+import numpy as np  # noqa: E402
+from pulsejet_sim.node_params import ros_value  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'sim_node.md'
@@ -46,14 +48,19 @@ def stop(proc: subprocess.Popen, timeout=10.0) -> int:
     return proc.returncode
 
 
-def run(seconds: float, rtf: float, publish_rate_hz: float, scene: str, controller: bool,
-        lookahead_s: float = 0.0) -> dict:
+def run(
+    seconds: float,
+    rtf: float,
+    publish_rate_hz: float,
+    scene: str,
+    controller: bool,
+    lookahead_s: float = 0.0,
+) -> dict:
+    from pulsejet_sim.scene import load_scene
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
-
-    from pulsejet_sim.scene import load_scene
 
     nominal_rate = publish_rate_hz or float(load_scene(scene).publish_rate_hz or 100.0)
     env = dict(os.environ)
@@ -61,12 +68,27 @@ def run(seconds: float, rtf: float, publish_rate_hz: float, scene: str, controll
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     domain = int(env['ROS_DOMAIN_ID'])
-    sim_cmd = [sys.executable, '-m', 'pulsejet_sim.sim_node', '--ros-args',
-               '-p', f'scene:={scene}', '-p', f'real_time_factor:={ros_value(rtf)}',
-               '-p', f'publish_rate_hz:={ros_value(nominal_rate)}', '-p', f'lookahead_s:={ros_value(lookahead_s)}']
+    sim_cmd = [
+        sys.executable,
+        '-m',
+        'pulsejet_sim.sim_node',
+        '--ros-args',
+        '-p',
+        f'scene:={scene}',
+        '-p',
+        f'real_time_factor:={ros_value(rtf)}',
+        '-p',
+        f'publish_rate_hz:={ros_value(nominal_rate)}',
+        '-p',
+        f'lookahead_s:={ros_value(lookahead_s)}',
+    ]
     procs = []
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(
+        context=context,
+        domain_id=domain,
+        signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+    )
     node = rclpy.create_node('bench_sim_node', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -76,21 +98,44 @@ def run(seconds: float, rtf: float, publish_rate_hz: float, scene: str, controll
         recv.append(time.monotonic())
         stamps.append(msg.clock.sec + msg.clock.nanosec * 1e-9)
 
-    node.create_subscription(Clock, '/clock', on_clock, QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    node.create_subscription(
+        Clock, '/clock', on_clock, QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    )
     try:
         if controller:
-            procs.append(subprocess.Popen([sys.executable, '-m', 'pulsejet_ctrl.controller_node', '--ros-args',
-                                           '-p', f'scene:={scene}'], env=env, stdin=subprocess.DEVNULL,
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        sim = subprocess.Popen(sim_cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE, text=True)
+            procs.append(
+                subprocess.Popen(
+                    [
+                        sys.executable,
+                        '-m',
+                        'pulsejet_ctrl.controller_node',
+                        '--ros-args',
+                        '-p',
+                        f'scene:={scene}',
+                    ],
+                    env=env,
+                    stdin=subprocess.DEVNULL,
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                )
+            )
+        sim = subprocess.Popen(
+            sim_cmd,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         procs.append(sim)
         # wait for the first /clock (scene loading, JIT), then 1 s of settling, then measure
         end = time.monotonic() + 120
         while not recv and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
             if sim.poll() is not None:
-                raise RuntimeError(f'sim_node exited with {sim.returncode}: {sim.stderr.read()[-2000:]}')
+                raise RuntimeError(
+                    f'sim_node exited with {sim.returncode}: {sim.stderr.read()[-2000:]}'
+                )
         if not recv:
             raise RuntimeError('no /clock within 120 s')
         settle = time.monotonic() + 1.0
@@ -117,14 +162,20 @@ def run(seconds: float, rtf: float, publish_rate_hz: float, scene: str, controll
     dev = np.abs(periods - nominal)
     sim_steps = np.diff(s)
     return {
-        'scene': scene, 'seconds': wall1 - wall0, 'rtf_requested': rtf, 'nominal_rate_hz': nominal_rate,
-        'messages': len(t), 'rate_hz': (len(t) - 1) / (t[-1] - t[0]),
-        'jitter_p50_ms': float(np.percentile(dev, 50) * 1e3), 'jitter_p99_ms': float(np.percentile(dev, 99) * 1e3),
+        'scene': scene,
+        'seconds': wall1 - wall0,
+        'rtf_requested': rtf,
+        'nominal_rate_hz': nominal_rate,
+        'messages': len(t),
+        'rate_hz': (len(t) - 1) / (t[-1] - t[0]),
+        'jitter_p50_ms': float(np.percentile(dev, 50) * 1e3),
+        'jitter_p99_ms': float(np.percentile(dev, 99) * 1e3),
         'jitter_max_ms': float(dev.max() * 1e3),
         'rtf_held': float((s[-1] - s[0]) / (t[-1] - t[0])),
         'sim_step_per_msg_ms': float(np.median(sim_steps) * 1e3),
         'cpu_percent': float(100 * (cpu1 - cpu0) / (wall1 - wall0)),
-        'controller': controller, 'lookahead_s': lookahead_s,
+        'controller': controller,
+        'lookahead_s': lookahead_s,
     }
 
 
@@ -136,7 +187,10 @@ def table(r: dict) -> str:
         ('sim_node lookahead_s', f"{r['lookahead_s']:g} s"),
         ('real-time factor held (sim s / wall s)', f"{r['rtf_held']:.4f}"),
         ('publication rate nominal', f"{r['nominal_rate_hz']:g} Hz"),
-        ('publication rate achieved (/clock)', f"{r['rate_hz']:.2f} Hz ({r['messages']} messages)"),
+        (
+            'publication rate achieved (/clock)',
+            f"{r['rate_hz']:.2f} Hz ({r['messages']} messages)",
+        ),
         ('period jitter p50 (abs(T - T0))', f"{r['jitter_p50_ms']:.3f} ms"),
         ('period jitter p99 (abs(T - T0))', f"{r['jitter_p99_ms']:.3f} ms"),
         ('period jitter max', f"{r['jitter_max_ms']:.3f} ms"),
@@ -148,21 +202,40 @@ def table(r: dict) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--seconds', type=float, default=60.0, help='wall seconds measured (default 60)')
+    ap = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
+    ap.add_argument(
+        '--seconds', type=float, default=60.0, help='wall seconds measured (default 60)'
+    )
     ap.add_argument('--real-time-factor', type=float, default=1.0)
     ap.add_argument('--publish-rate', type=float, default=0.0, help='Hz; 0 = the scene value')
     ap.add_argument('--scene', default='pump_cycle')
-    ap.add_argument('--controller', action='store_true', help='also run controller_node (pump/valve cycling)')
-    ap.add_argument('--lookahead', type=float, default=0.0, help="sim_node's lookahead_s (s of simulated time)")
+    ap.add_argument(
+        '--controller', action='store_true', help='also run controller_node (pump/valve cycling)'
+    )
+    ap.add_argument(
+        '--lookahead', type=float, default=0.0, help="sim_node's lookahead_s (s of simulated time)"
+    )
     ap.add_argument('--no-write', action='store_true', help=f'do not append to {RESULTS}')
     args = ap.parse_args(argv)
-    r = run(args.seconds, args.real_time_factor, args.publish_rate, args.scene, args.controller, args.lookahead)
+    r = run(
+        args.seconds,
+        args.real_time_factor,
+        args.publish_rate,
+        args.scene,
+        args.controller,
+        args.lookahead,
+    )
     now = _dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
-    header = (f'## sim_node benchmark, {now}\n\n'
-              f'machine: {os.cpu_count()} CPUs (nproc {len(os.sched_getaffinity(0))}), {platform.machine()}, '
-              f'{platform.system()} {platform.release()}; python {platform.python_version()}\n'
-              f'command: `{" ".join(["benchmarks/bench_sim_node.py"] + (argv if argv is not None else sys.argv[1:]))}`\n')
+    command_line = ' '.join(
+        ['benchmarks/bench_sim_node.py'] + (argv if argv is not None else sys.argv[1:])
+    )
+    header = (
+        f'## sim_node benchmark, {now}\n\n'
+        f'machine: {os.cpu_count()} CPUs (nproc {len(os.sched_getaffinity(0))}),'
+        f' {platform.machine()}, '
+        f'{platform.system()} {platform.release()}; python {platform.python_version()}\n'
+        f'command: `{command_line}`\n'
+    )
     text = header + '\n' + table(r) + '\n'
     print(text)
     if not args.no_write:
@@ -170,7 +243,10 @@ def main(argv=None) -> int:
         new = not RESULTS.exists()
         with open(RESULTS, 'a') as f:
             if new:
-                f.write('# sim_node live benchmarks\n\nProduced by `benchmarks/bench_sim_node.py`; newest last.\n\n')
+                f.write(
+                    '# sim_node live benchmarks\n\nProduced by `benchmarks/bench_sim_node.py`;'
+                    ' newest last.\n\n'
+                )
             f.write(text + '\n')
         print(f'appended to {RESULTS}')
     return 0

@@ -21,6 +21,10 @@ D. fixed_nozzle: in the paper coupling, the jet leaves through a fixed nozzle of
    authors' later code (github.com/federicorenda/Unified-Multi-soft-body-Dynamics, octopus_driver.m
    `Rn = 12.5e-3; Area_out = pi*Rn.^2`, used unchanged in octopus_derivatives.m's thrust) keeps the
    exit area fixed whatever the shell does (findings 1, 2; external cases, paper coupling).
+E. authors_code: the authors' code as written (`coupling: paper_code`, docs/PHYSICS_SHELL.md "Experiment E"):
+   pole clamped and edge free, fixed 12.5 mm nozzle, a refilling force, thrust + refill + body drag as a
+   uniform axial load on the wall, added mass 1.1 x the shell's own mass in every translation, the
+   shell's inertia in the vehicle's frame; all 54 cases of the study's `paper` coupling (36 external, 18 internal) (all findings).
 """
 from __future__ import annotations
 
@@ -67,11 +71,16 @@ def fixed_nozzle(spec: RunSpec) -> RunSpec:
     return changed(spec, {'jet': {'outlet': 'free_edge_fixed_nozzle', 'outlet_radius_m': 0.0125}})
 
 
+def authors_code(spec: RunSpec) -> RunSpec:
+    return changed(spec, {'coupling': 'paper_code',
+                          'jet': {'outlet': 'free_edge_fixed_nozzle', 'outlet_radius_m': 0.0125}})
+
+
 @dataclass(frozen=True)
 class Experiment:
     letter: str
     title: str
-    study: str                    # which of the study's cases it reruns
+    study: str                    # which of the study's cases it reruns ('both': external and internal)
     change: Callable[[RunSpec], RunSpec]
     couplings: tuple[str, ...]
     refine: bool                  # rerun every case at study.REFINED and store both
@@ -109,6 +118,25 @@ EXPERIMENTS = {
         "ellipsoid its opening at rest, for the cone a nozzle inside its 30 mm edge), the inlet is the code's"
         " `Area_out + 3*pi*Rb.^2`, Rb = 10 mm (the model's default). The 36 external cases in the paper "
         'coupling (the consistent coupling already stops the wall before the nozzle shuts).'),
+    'authors_code': Experiment(
+        'E', "The authors' code as written (`coupling: paper_code`) in place of the `paper` coupling",
+        'both', authors_code, ('paper',), True,
+        "Reading (decided and written into docs/PHYSICS_SHELL.md, \"Experiment E: the authors' code\", with the "
+        "code's lines quoted, before any run): the six places where the study's `paper` coupling departs from the "
+        'authors\' public code of the same shell (github.com/federicorenda/Unified-Multi-soft-body-Dynamics, '
+        'commit 2cabfe59, `octopus_driver.m`, `octopus_derivatives.m`), adopted together: (1) the pole is '
+        'clamped to the body and the open edge is free in r, z and theta (`sigmas_o = zeros(6,1)` at X = 0, '
+        'the "buco anteriore"; zero-stress "condizioni su X=L"); (2) a fixed 12.5 mm nozzle, `Area_out = '
+        'pi*Rn.^2`, `Area_in = Area_out+3*pi*Rb.^2`; (3) a refilling force `-Cf rho V\'^2/A_in` '
+        '(`(Vol_punto>0)*Cf/(Area_in*Aream)`); (4) thrust, refilling force and body drag as a uniform axial '
+        'load per reference area on the wall (`fluid = mod_fluid*[senth;costh;0]`, `zetas_e = [0;0;0;fluid]`), '
+        'reaching the vehicle only through the clamped pole (`F_is1r`); no cavity pressure, no tangential '
+        'drag on the wall; (5) added mass 1.1 x the shell\'s own mass in r and z (`Gammas_ag = '
+        'Gammas+ro_shel*B*diag([0 0 0 2*h 2*h 2*h])`); (6) the shell\'s inertia sees the vehicle\'s '
+        'acceleration (`- sigmar_bar_punto`), the vehicle solved with the shell. Every study value stays (the '
+        'code\'s actuation, masses, geometry and head drag are not adopted; the study\'s internal water and '
+        'ram stay). The 54 cases of the study\'s `paper` coupling (36 external, 18 internal), all five '
+        'findings; runs keep the study\'s names (`.../paper/...`).'),
 }
 
 
@@ -172,7 +200,8 @@ def verdicts(rows, stored, keep, coupling, prefix):
 
 def section(key: str, exp: Experiment, specs: list[RunSpec], stored: list[dict]) -> str:
     start = time.perf_counter()
-    cases = [exp.change(s) for s in specs if s.study == exp.study and dict(s.labels)['coupling'] in exp.couplings]
+    cases = [exp.change(s) for s in specs
+             if exp.study in ('both', s.study) and dict(s.labels)['coupling'] in exp.couplings]
     rows = run_all(cases)
     fine = run_all([study.refined(s) for s in cases]) if exp.refine else []
     # a run whose refined value moved by more than study.CONVERGED is run once more, at twice the
@@ -181,8 +210,8 @@ def section(key: str, exp: Experiment, specs: list[RunSpec], stored: list[dict])
              if abs(r['peak_speed_m_s'] / f['peak_speed_m_s'] - 1.0) > study.CONVERGED]
     finer = dict(zip(loose, run_all([changed(cases[i], FINER) for i in loose])))
     wall = time.perf_counter() - start
-    keep = 'internal' if exp.study == 'external' else 'external'
-    prefix = exp.study
+    keep = {'external': 'internal', 'internal': 'external'}.get(exp.study, '')
+    prefix = '' if exp.study == 'both' else exp.study
     lines = [f'## {exp.letter}. {exp.title}', '']
     if exp.refine:
         lines += [f'Experiment `{key}` ({datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, '
@@ -196,7 +225,7 @@ def section(key: str, exp: Experiment, specs: list[RunSpec], stored: list[dict])
         mine = verdicts(rows, stored, keep, coupling, prefix)
         lines += [f'### Coupling `{coupling}`', '']
         if exp.refine:
-            base = verdicts([r for r in stored if r['study'] == exp.study], stored, keep, coupling, prefix)
+            base = verdicts([r for r in stored if exp.study in ('both', r['study'])], stored, keep, coupling, prefix)
             refined = verdicts(fine, stored, keep, coupling, prefix)
             lines += ['| finding | study (stored) | this reading | this reading, refined (192 el., 0.25 ms) |',
                       '|---|---|---|---|']

@@ -1,4 +1,7 @@
-"""Resolution of paper 000's study (config/sweeps/paper000_study.yaml) before it runs: four corner
+"""
+Resolution of paper 000's study before it runs.
+
+Resolution of paper 000's study (config/sweeps/paper000_study.yaml) before it runs: four corner
 cases of the study (softest and stiffest mantle, fastest routine, both actuations and mantles) in
 both couplings at three meshes/steps (elements x2 and step /2 from one to the next), peak speed
 against the finest.
@@ -6,50 +9,88 @@ Numerics only: it looks at no finding. Writes benchmarks/results/paper000_study/
 
     .venv/bin/python benchmarks/paper000_resolution.py
 """
+
 from __future__ import annotations
 
 import datetime
+from pathlib import Path
 import platform
 import sys
 import time
-from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.sweep import RunSpec, load_sweep, merge, run_one  # noqa: E402
+from pulsejet_sim.sweep import load_sweep, merge, run_one, RunSpec  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / 'results' / 'paper000_study'
-CORNERS = (('external', {'mantle': 'cone', 'stiffness': 'E20k', 'routine': 'T0.53', 'distribution': 'rising'}),
-           ('external', {'mantle': 'ellipsoid', 'stiffness': 'E80k', 'routine': 'T0.53', 'distribution': 'falling'}),
-           ('internal', {'mantle': 'cone', 'stiffness': 'E80k', 'routine': 'T0.53'}),
-           ('internal', {'mantle': 'ellipsoid', 'stiffness': 'E20k', 'routine': 'T0.53'}))
-CASES = tuple((study, {'coupling': c, **labels}) for c in ('paper', 'consistent') for study, labels in CORNERS)
+CORNERS = (
+    (
+        'external',
+        {'mantle': 'cone', 'stiffness': 'E20k', 'routine': 'T0.53', 'distribution': 'rising'},
+    ),
+    (
+        'external',
+        {
+            'mantle': 'ellipsoid',
+            'stiffness': 'E80k',
+            'routine': 'T0.53',
+            'distribution': 'falling',
+        },
+    ),
+    ('internal', {'mantle': 'cone', 'stiffness': 'E80k', 'routine': 'T0.53'}),
+    ('internal', {'mantle': 'ellipsoid', 'stiffness': 'E20k', 'routine': 'T0.53'}),
+)
+CASES = tuple(
+    (study, {'coupling': c, **labels})
+    for c in ('paper', 'consistent')
+    for study, labels in CORNERS
+)
 LEVELS = ((48, 1e-3), (96, 5e-4), (192, 2.5e-4))
 
 
 def at_resolution(spec: RunSpec, elements: int, dt_s: float) -> RunSpec:
-    overrides = merge(dict(spec.overrides), {'mesh': {'elements': elements}, 'simulation': {'dt_s': dt_s}})
+    overrides = merge(
+        dict(spec.overrides), {'mesh': {'elements': elements}, 'simulation': {'dt_s': dt_s}}
+    )
     return RunSpec(spec.study, spec.labels, spec.scene, overrides, spec.duration_s, spec.replace)
 
 
 def main() -> int:
     _, runs = load_sweep('paper000_study')
-    lines = [f'# Resolution of the paper 000 study ({datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, '
-             f'{platform.machine()}, Python {platform.python_version()}, `benchmarks/paper000_resolution.py`)', '',
-             'Peak vehicle speed (m/s) of four corner cases of `config/sweeps/paper000_study.yaml`; error against '
-             'the finest level.', '',
-             '| case | ' + ' | '.join(f'{n} el, {dt * 1e3:g} ms' for n, dt in LEVELS) + ' | errors | wall s |',
-             '|---|' + '---|' * (len(LEVELS) + 2)]
+    lines = [
+        (
+            '# Resolution of the paper 000 study'
+            f' ({datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC},'
+            f' {platform.machine()}, Python {platform.python_version()},'
+            ' `benchmarks/paper000_resolution.py`)'
+        ),
+        '',
+        (
+            'Peak vehicle speed (m/s) of four corner cases of `config/sweeps/paper000_study.yaml`;'
+            ' error against the finest level.'
+        ),
+        '',
+        '| case | '
+        + ' | '.join(f'{n} el, {dt * 1e3:g} ms' for n, dt in LEVELS)
+        + ' | errors | wall s |',
+        '|---|' + '---|' * (len(LEVELS) + 2),
+    ]
     for study, labels in CASES:
         spec = next(r for r in runs if r.study == study and dict(r.labels) == labels)
         start = time.perf_counter()
         peaks = []
         for n, dt in LEVELS:
             row = run_one(at_resolution(spec, n, dt))
-            peaks.append(row.metrics['peak_speed_m_s'] if row.metrics and not row.fault else float('nan'))
+            peaks.append(
+                row.metrics['peak_speed_m_s'] if row.metrics and not row.fault else float('nan')
+            )
         wall = time.perf_counter() - start
         errors = ', '.join(f'{abs(p / peaks[-1] - 1) * 100:.2f} %' for p in peaks[:-1])
-        lines.append(f'| {spec.name} | ' + ' | '.join(f'{p:.4f}' for p in peaks) + f' | {errors} | {wall:.0f} |')
+        lines.append(
+            f'| {spec.name} | '
+            + ' | '.join(f'{p:.4f}' for p in peaks)
+            + f' | {errors} | {wall:.0f} |'
+        )
         print(lines[-1], flush=True)
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / 'resolution.md').write_text('\n'.join(lines) + '\n')

@@ -1,4 +1,7 @@
-"""Paper 000's study (section 5: 36 external + 18 internal actuation runs) in both couplings, which
+"""
+Paper 000's study in both couplings: the findings each reproduces, and the resolution.
+
+Paper 000's study (section 5: 36 external + 18 internal actuation runs) in both couplings, which
 of the paper's five qualitative findings each coupling reproduces, and the resolution of every run.
 Not a test (about 10 minutes on 2 cores): writes benchmarks/results/paper000_study/
 {study.csv, refined.csv, study.png, README.md}.
@@ -12,28 +15,39 @@ the study's values are in config/sweeps/paper000_study.yaml, chosen once with th
 `study.csv` holds only deterministic columns, so a rerun reproduces it bit for bit (the test
 `test/test_paper000_study.py` reruns one case and compares it with its stored row).
 """
+
 from __future__ import annotations
 
 import csv
 import datetime
 import os
+from pathlib import Path
 import platform
 import sys
 import time
-from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.sweep import RunSpec, load_sweep, merge, plot_bars, run_sweep  # noqa: E402
+from pulsejet_sim.sweep import load_sweep, merge, plot_bars, run_sweep, RunSpec  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / 'results' / 'paper000_study'
 SWEEP = 'paper000_study'
-COLUMNS = ('peak_speed_m_s', 'mean_speed_m_s', 'distance_m', 'peak_thrust_n', 'volume_min_m3', 'volume_max_m3',
-           'closure_relative')
-REFINED = {'mesh': {'elements': 192}, 'simulation': {'dt_s': 2.5e-4}}   # twice the elements, half the step
-CONVERGED = 0.02          # a run's peak speed within 2 % of the refined run's
+COLUMNS = (
+    'peak_speed_m_s',
+    'mean_speed_m_s',
+    'distance_m',
+    'peak_thrust_n',
+    'volume_min_m3',
+    'volume_max_m3',
+    'closure_relative',
+)
+REFINED = {
+    'mesh': {'elements': 192},
+    'simulation': {'dt_s': 2.5e-4},
+}  # twice the elements, half the step
+CONVERGED = 0.02  # a run's peak speed within 2 % of the refined run's
 SPREAD_ALMOST_NONE = 1.15  # "almost independent of the routine": fastest/slowest routine <= 1.15
-DOUBLES = 1.8              # "doubling": fastest/second-fastest routine >= 1.8
+DOUBLES = 1.8  # "doubling": fastest/second-fastest routine >= 1.8
 
 
 def speed(row) -> float:
@@ -55,27 +69,60 @@ def findings(rows: list[dict]) -> list[tuple[str, str, bool, str]]:
     out = []
     top3 = sorted(ext, key=speed, reverse=True)[:3]
     ok = all(r['mantle'] == 'ellipsoid' and r['stiffness'] == stiffest(ext) for r in top3)
-    out.append(('external: the ellipsoid with the highest stiffness gives the three highest peaks',
-                '5.1, bar plot of the 36 runs', ok, 'top three: ' + ', '.join(f'{r["label"]} {speed(r):.3g} m/s' for r in top3)))
+    out.append(
+        (
+            'external: the ellipsoid with the highest stiffness gives the three highest peaks',
+            '5.1, bar plot of the 36 runs',
+            ok,
+            'top three: ' + ', '.join(f'{r["label"]} {speed(r):.3g} m/s' for r in top3),
+        )
+    )
     ratios = {}
     for mantle in ('cone', 'ellipsoid'):
         values = []
         for r in select(ext, mantle=mantle, distribution='rising'):
-            twin = select(ext, mantle=mantle, distribution='falling', stiffness=r['stiffness'], routine=r['routine'])[0]
+            twin = select(
+                ext,
+                mantle=mantle,
+                distribution='falling',
+                stiffness=r['stiffness'],
+                routine=r['routine'],
+            )[0]
             values.append(max(speed(r), speed(twin)) / min(speed(r), speed(twin)))
         ratios[mantle] = sum(values) / len(values)
     # "how little, instead, it affects the performances of the conical geometry": the cone's own
     # spread must be small too, not only smaller than the ellipsoid's
-    ok = ratios['ellipsoid'] - 1.0 > 2.0 * (ratios['cone'] - 1.0) and ratios['cone'] <= SPREAD_ALMOST_NONE
-    out.append(('external: the spatial distribution matters much more for the ellipsoid than for the cone',
-                '5.1, Fig. 11', ok, f'mean faster/slower ratio of the two distributions: ellipsoid '
-                f'{ratios["ellipsoid"]:.2f}, cone {ratios["cone"]:.2f} (rule: ellipsoid - 1 > 2 (cone - 1) '
-                f'and cone <= {SPREAD_ALMOST_NONE})'))
-    # Fig. 13's caption: "The highest peaks correspond to the conical mantles with the highest stiffness"
+    ok = (
+        ratios['ellipsoid'] - 1.0 > 2.0 * (ratios['cone'] - 1.0)
+        and ratios['cone'] <= SPREAD_ALMOST_NONE
+    )
+    out.append(
+        (
+            (
+                'external: the spatial distribution matters much more for the ellipsoid than for'
+                ' the cone'
+            ),
+            '5.1, Fig. 11',
+            ok,
+            (
+                'mean faster/slower ratio of the two distributions: ellipsoid'
+                f' {ratios["ellipsoid"]:.2f}, cone {ratios["cone"]:.2f} (rule: ellipsoid - 1 > 2'
+                f' (cone - 1) and cone <= {SPREAD_ALMOST_NONE})'
+            ),
+        )
+    )
+    # Fig. 13's caption: "The highest peaks correspond to the conical mantles with the highest
+    # stiffness"
     top3 = sorted(inn, key=speed, reverse=True)[:3]
     ok = all(r['mantle'] == 'cone' and r['stiffness'] == stiffest(inn) for r in top3)
-    out.append(('internal: the conical mantles with the highest stiffness give the highest peaks', '5.2, Fig. 13', ok,
-                'top three: ' + ', '.join(f'{r["label"]} {speed(r):.3g} m/s' for r in top3)))
+    out.append(
+        (
+            'internal: the conical mantles with the highest stiffness give the highest peaks',
+            '5.2, Fig. 13',
+            ok,
+            'top three: ' + ', '.join(f'{r["label"]} {speed(r):.3g} m/s' for r in top3),
+        )
+    )
     spreads, singled = {}, {}
     for mantle in ('ellipsoid', 'cone'):
         for stiffness in sorted({r['stiffness'] for r in inn}):
@@ -86,14 +133,26 @@ def findings(rows: list[dict]) -> list[tuple[str, str, bool, str]]:
     # routine stands out, so the fastest is compared with the second fastest, not the slowest
     ell = {s: x for (m, s), x in singled.items() if m == 'ellipsoid'}
     cone = {s: x for (m, s), x in spreads.items() if m == 'cone'}
-    out.append(('internal: one ellipsoid routine resonates and doubles the speed', '5.2, Fig. 17 (test 9)',
-                any(x >= DOUBLES for x in ell.values()),
-                'fastest/second-fastest routine: ' + ', '.join(f'{s} {x:.2f}' for s, x in ell.items())
-                + f' (rule: some >= {DOUBLES})'))
-    out.append(('internal: the cone is almost independent of the routine', '5.2, Fig. 17',
-                all(x <= SPREAD_ALMOST_NONE for x in cone.values()),
-                'fastest/slowest routine: ' + ', '.join(f'{s} {x:.2f}' for s, x in cone.items())
-                + f' (rule: all <= {SPREAD_ALMOST_NONE})'))
+    out.append(
+        (
+            'internal: one ellipsoid routine resonates and doubles the speed',
+            '5.2, Fig. 17 (test 9)',
+            any(x >= DOUBLES for x in ell.values()),
+            'fastest/second-fastest routine: '
+            + ', '.join(f'{s} {x:.2f}' for s, x in ell.items())
+            + f' (rule: some >= {DOUBLES})',
+        )
+    )
+    out.append(
+        (
+            'internal: the cone is almost independent of the routine',
+            '5.2, Fig. 17',
+            all(x <= SPREAD_ALMOST_NONE for x in cone.values()),
+            'fastest/slowest routine: '
+            + ', '.join(f'{s} {x:.2f}' for s, x in cone.items())
+            + f' (rule: all <= {SPREAD_ALMOST_NONE})',
+        )
+    )
     return out
 
 
@@ -108,17 +167,35 @@ def as_rows(specs: list[RunSpec], results) -> list[dict]:
 
 
 def write_table(rows: list[dict], path: Path) -> None:
-    keys = ['run', 'study', 'coupling', 'mantle', 'stiffness', 'routine', 'distribution', *COLUMNS, 'fault']
+    keys = [
+        'run',
+        'study',
+        'coupling',
+        'mantle',
+        'stiffness',
+        'routine',
+        'distribution',
+        *COLUMNS,
+        'fault',
+    ]
     with open(path, 'w', newline='') as fh:
         writer = csv.writer(fh, lineterminator='\n')
         writer.writerow(keys)
         for r in rows:
-            writer.writerow([repr(r[k]) if isinstance(r.get(k), float) else r.get(k, '') for k in keys])
+            writer.writerow(
+                [repr(r[k]) if isinstance(r.get(k), float) else r.get(k, '') for k in keys]
+            )
 
 
 def refined(spec: RunSpec) -> RunSpec:
-    return RunSpec(spec.study, spec.labels, spec.scene, merge(dict(spec.overrides), REFINED), spec.duration_s,
-                   spec.replace)
+    return RunSpec(
+        spec.study,
+        spec.labels,
+        spec.scene,
+        merge(dict(spec.overrides), REFINED),
+        spec.duration_s,
+        spec.replace,
+    )
 
 
 def read_table(path: Path) -> list[dict]:
@@ -127,14 +204,18 @@ def read_table(path: Path) -> list[dict]:
     for r in rows:
         for c in COLUMNS:
             r[c] = float(r[c])
-        r['label'] = '/'.join(r[k] for k in ('mantle', 'stiffness', 'routine', 'distribution') if r[k])
+        r['label'] = '/'.join(
+            r[k] for k in ('mantle', 'stiffness', 'routine', 'distribution') if r[k]
+        )
     return rows
 
 
 def main() -> int:
     meta, specs = load_sweep(SWEEP)
     if '--report-only' in sys.argv[1:]:
-        report(meta, len(specs), read_table(OUT / 'study.csv'), read_table(OUT / 'refined.csv'), None)
+        report(
+            meta, len(specs), read_table(OUT / 'study.csv'), read_table(OUT / 'refined.csv'), None
+        )
         return 0
     start = time.perf_counter()
     results = run_sweep(specs)
@@ -150,37 +231,68 @@ def main() -> int:
     return 0
 
 
-def report(meta: dict, n_runs: int, rows: list[dict], fine_rows: list[dict], wall: float | None) -> None:
+def report(
+    meta: dict, n_runs: int, rows: list[dict], fine_rows: list[dict], wall: float | None
+) -> None:
     errors = [abs(speed(r) / speed(f) - 1.0) for r, f in zip(rows, fine_rows)]
-    when = (f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, {platform.machine()}, '
-            f'{os.cpu_count()} cores, Python {platform.python_version()}; command '
-            f'`.venv/bin/python benchmarks/paper000_study.py` ({wall:.0f} s wall)') if wall is not None else (
-            'report rebuilt from the stored tables by `benchmarks/paper000_study.py --report-only`')
-    lines = [f'# Paper 000 study in both couplings: {n_runs} runs of {meta["duration_s"]:g} s', '',
-             f'{when}. Values: '
-             f'`config/sweeps/{SWEEP}.yaml` (chosen once, reasons there). Tables: `study.csv` (the study), '
-             f'`refined.csv` (every run again at 192 elements, 0.25 ms); plot: `study.png`.', '',
-             'History, so that a reproduced finding is read for what it is worth: an earlier study of the '
-             'same design (rigid-ring nozzle, consistent coupling, a 12 N cable load with no stated source; '
-             'removed in 2c6c12c) reproduced none of the four findings it checked. The readings used here '
-             '(the paper coupling, the mantle edge as the nozzle, the cable load sized from the authors\' '
-             'code, the constant-depth muscle) were adopted after it, and the rules of findings 2-4 and the '
-             'body\'s added mass after an independent review, before any outcome of this study was read. '
-             'Discussion: docs/PHYSICS_SHELL.md.', '']
+    when = (
+        f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, {platform.machine()},'
+        f' {os.cpu_count()} cores, Python {platform.python_version()}; command `.venv/bin/python'
+        f' benchmarks/paper000_study.py` ({wall:.0f} s wall)'
+        if wall is not None
+        else (
+            'report rebuilt from the stored tables by `benchmarks/paper000_study.py --report-only`'
+        )
+    )
+    lines = [
+        f'# Paper 000 study in both couplings: {n_runs} runs of {meta["duration_s"]:g} s',
+        '',
+        (
+            f'{when}. Values: `config/sweeps/{SWEEP}.yaml` (chosen once, reasons there). Tables:'
+            ' `study.csv` (the study), `refined.csv` (every run again at 192 elements, 0.25 ms);'
+            ' plot: `study.png`.'
+        ),
+        '',
+        (
+            'History, so that a reproduced finding is read for what it is worth: an earlier study'
+            ' of the same design (rigid-ring nozzle, consistent coupling, a 12 N cable load with'
+            ' no stated source; removed in 2c6c12c) reproduced none of the four findings it'
+            ' checked. The readings used here (the paper coupling, the mantle edge as the nozzle,'
+            " the cable load sized from the authors' code, the constant-depth muscle) were"
+            " adopted after it, and the rules of findings 2-4 and the body's added mass after an"
+            ' independent review, before any outcome of this study was read. Discussion:'
+            ' docs/PHYSICS_SHELL.md.'
+        ),
+        '',
+    ]
     for coupling in ('paper', 'consistent'):
         group = [r for r in rows if r['coupling'] == coupling]
-        lines += [f'## Coupling `{coupling}`', '', '| finding of paper 000 | section | reproduced | what the runs show |',
-                  '|---|---|---|---|']
+        lines += [
+            f'## Coupling `{coupling}`',
+            '',
+            '| finding of paper 000 | section | reproduced | what the runs show |',
+            '|---|---|---|---|',
+        ]
         for claim, where, ok, detail in findings(group):
             lines.append(f'| {claim} | {where} | {"yes" if ok else "no"} | {detail} |')
         lines.append('')
-    lines += ['## Resolution', '',
-              f'Peak speed of each run against the same run with twice the elements and half the step: '
-              f'largest error {max(errors) * 100:.2f} %, median {sorted(errors)[len(errors) // 2] * 100:.2f} %; '
-              f'{sum(e > CONVERGED for e in errors)} of {len(errors)} runs above {CONVERGED * 100:g} %:', '']
+    lines += [
+        '## Resolution',
+        '',
+        (
+            'Peak speed of each run against the same run with twice the elements and half the'
+            f' step: largest error {max(errors) * 100:.2f} %, median'
+            f' {sorted(errors)[len(errors) // 2] * 100:.2f} %;'
+            f' {sum(e > CONVERGED for e in errors)} of {len(errors)} runs above'
+            f' {CONVERGED * 100:g} %:'
+        ),
+        '',
+    ]
     for r, f, e in zip(rows, fine_rows, errors):
         if e > CONVERGED:
-            lines.append(f'- {r["run"]}: {speed(r):.4g} m/s vs {speed(f):.4g} m/s refined ({e * 100:.1f} %)')
+            lines.append(
+                f'- {r["run"]}: {speed(r):.4g} m/s vs {speed(f):.4g} m/s refined ({e * 100:.1f} %)'
+            )
     faults = [r for r in rows + fine_rows if r['fault']]
     lines += ['', f'Faults: {len(faults)}'] + [f'- {r["run"]}: {r["fault"]}' for r in faults]
     text = '\n'.join(lines) + '\n'

@@ -1,5 +1,8 @@
-"""ROS 2 node around a routine of `pulsejet_ctrl.routines`: follows the node's ROS clock (simulation
-time from /clock through rclpy's time source, `use_sim_time`), publishes pump/valve/cable commands.
+"""
+ROS 2 node that runs a routine of `pulsejet_ctrl.routines` on the node's ROS clock.
+
+It follows the node's ROS clock (simulation time from /clock through rclpy's time source,
+`use_sim_time`) and publishes pump/valve/cable commands.
 
 A thin adapter: the state machine lives in `pulsejet_ctrl.routines` (PumpValveRoutine, or
 CableRoutine for a shell scene whose cable follows a routine: the scene is loaded command-driven,
@@ -13,19 +16,24 @@ routine restarts and answers the new time at once. ROS time 0 means the simulati
 routine's command for t = 0 is re-sent every STANDBY_PERIOD_S of wall time and the simulator starts
 with it. With `-p use_sim_time:=false` the routine runs in wall time from the node's start.
 
-Parameters
-  scene             (string, read-only)  scene whose `routine:` block gives the kind and defaults; default shell_robot
-  rate_hz           (double, live)       command rate in simulated time, [0.001, 10000] Hz; default 50
-  closed_loop       (bool, read-only)    answer every published state with one atomic command stamped
-                                         at that state's time (sim_node's closed_loop pacing); default false
-  routine fields    (read-only)          pump_valve: inflate_s, target_volume_m3, pump_flow_m3_s, hold_s,
-                                         jet_s, valve_opening, start_delay_s (double), cycles (int);
-                                         cable: amplitude_n, frequency_hz, contraction_s, release_s,
-                                         start_delay_s. Default from the scene, each overridable at
-                                         start-up; ranges from the routine's spec (`ros2 param describe`)
-  use_sim_time      (bool)               rclpy's own: follow /clock; default TRUE for this node (it is
-                                         driven by sim_node; false with closed_loop, which runs on the
-                                         state stamps); `-p use_sim_time:=false` = wall time
+ROS parameters
+  scene             (string, read-only)  scene whose `routine:` block gives the kind and
+                                         defaults; default shell_robot
+  rate_hz           (double, live)       command rate in simulated time, [0.001, 10000] Hz;
+                                         default 50
+  closed_loop       (bool, read-only)    answer every published state with one atomic command
+                                         stamped at that state's time (sim_node's closed_loop
+                                         pacing); default false
+  routine fields    (read-only)          pump_valve: inflate_s, target_volume_m3, pump_flow_m3_s,
+                                         hold_s, jet_s, valve_opening, start_delay_s (double),
+                                         cycles (int); cable: amplitude_n, frequency_hz,
+                                         contraction_s, release_s, start_delay_s. Default from the
+                                         scene, each overridable at start-up; ranges from the
+                                         routine's spec (`ros2 param describe`)
+  use_sim_time      (bool)               rclpy's own: follow /clock; default TRUE for this node
+                                         (it is driven by sim_node; false with closed_loop, which
+                                         runs on the state stamps); `-p use_sim_time:=false` =
+                                         wall time
 Every parameter has a descriptor (description, range); values are checked at declaration and on
 live changes, a rejection names the value and the allowed range.
 Subscribes /clock through rclpy's TimeSource (rosgraph_msgs/Clock, best effort depth 1: a reliable
@@ -35,11 +43,16 @@ state stamps, not the clock, drive the routine).
 Publishes pulsejet/cmd/pump_flow (m^3/s), pulsejet/cmd/valve (0..1), pulsejet/cmd/cable_force (N);
 with closed_loop instead pulsejet/cmd/command (sensor_msgs/JointState, all actuators at once).
 """
+
 from __future__ import annotations
 
 import math
 import sys
 
+from pulsejet_ctrl import routines as _routines
+from pulsejet_sim import messages
+from pulsejet_sim.node_params import check_parameters, ParamSpec
+from pulsejet_sim.scene import DEFAULT_SCENE
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockChange, JumpThreshold
 from rclpy.clock_type import ClockType
@@ -48,11 +61,6 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64
-
-from pulsejet_ctrl import routines as _routines
-from pulsejet_sim import messages
-from pulsejet_sim.node_params import ParamSpec, check_parameters
-from pulsejet_sim.scene import DEFAULT_SCENE
 
 #: routine field -> description (ranges and defaults come from the routine's spec)
 ROUTINE_FIELDS = {
@@ -88,17 +96,34 @@ class ControllerNode(Node):
         self._ready = False
         # every value is checked here, at declaration (command-line overrides) and on live changes
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._declare(ParamSpec('scene', DEFAULT_SCENE, 'scene whose routine block gives the default parameters',
-                                read_only=True, allowed='a scene name under config/ or a YAML file path'))
-        self._declare(ParamSpec('rate_hz', 50.0, 'command rate in simulated time (Hz); live', 1e-3, 10000.0))
-        self.closed_loop = bool(self._declare(ParamSpec(
-            'closed_loop', False, 'answer every state with one atomic command stamped at its time '
-            '(for sim_node pacing closed_loop)', read_only=True)))
+        self._declare(
+            ParamSpec(
+                'scene',
+                DEFAULT_SCENE,
+                'scene whose routine block gives the default parameters',
+                read_only=True,
+                allowed='a scene name under config/ or a YAML file path',
+            )
+        )
+        self._declare(
+            ParamSpec('rate_hz', 50.0, 'command rate in simulated time (Hz); live', 1e-3, 10000.0)
+        )
+        self.closed_loop = bool(
+            self._declare(
+                ParamSpec(
+                    'closed_loop',
+                    False,
+                    'answer every state with one atomic command stamped at its time '
+                    '(for sim_node pacing closed_loop)',
+                    read_only=True,
+                )
+            )
+        )
         # use_sim_time defaults to true here, except with closed_loop (the state stamps drive the
-        # routine there: no /clock subscription, as before). rclpy's TimeSource declared it (default
-        # false) in Node.__init__; constructor parameter_overrides would beat the command line, so
-        # the default is applied only when neither the command line, a params file nor the caller's
-        # parameter_overrides gave a value (-p use_sim_time:=false still means wall time).
+        # routine there: no /clock subscription, as before). rclpy's TimeSource declared it
+        # (default false) in Node.__init__; constructor parameter_overrides would beat the command
+        # line, so the default is applied only when neither the command line, a params file nor the
+        # caller's parameter_overrides gave a value (-p use_sim_time:=false still means wall time).
         if USE_SIM_TIME not in self._parameter_overrides and not self.closed_loop:
             result = self.set_parameters([Parameter(USE_SIM_TIME, Parameter.Type.BOOL, True)])[0]
             if not result.successful:
@@ -107,10 +132,15 @@ class ControllerNode(Node):
         scene = load_scene(self.get_parameter('scene').value, command_driven=True)
         scene_routine = dict(getattr(scene, 'routine', None) or {})
         if not scene_routine:
-            self.get_logger().warning(f'scene {scene.name!r} has no routine block: the routine defaults apply')
+            self.get_logger().warning(
+                f'scene {scene.name!r} has no routine block: the routine defaults apply'
+            )
         kind = scene_routine.get('kind', 'pump_valve')
         if kind not in ROUTINE_SPECS:
-            raise ValueError(f'scene {scene.name!r}: routine.kind={kind!r}; allowed: one of {", ".join(ROUTINE_SPECS)}')
+            raise ValueError(
+                f'scene {scene.name!r}: routine.kind={kind!r}; allowed: one of'
+                f' {", ".join(ROUTINE_SPECS)}'
+            )
         self._routine_cls = routines.ROUTINES[kind]
         config = dict(scene_routine, kind=kind)
         for name, number in ROUTINE_SPECS[kind].items():
@@ -132,41 +162,59 @@ class ControllerNode(Node):
         self.period_s = 1.0 / self.rate_hz
         self._ready = True
 
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE
+        )
         self._qos = qos
         self._pubs = {}
         if self.closed_loop:
             self._pubs[messages.TOPIC_CMD_COMMAND] = self.create_publisher(
-                messages.message_class(messages.TOPIC_CMD_COMMAND), messages.TOPIC_CMD_COMMAND, qos)
+                messages.message_class(messages.TOPIC_CMD_COMMAND), messages.TOPIC_CMD_COMMAND, qos
+            )
         else:
             for topic in messages.COMMAND_TOPICS:
                 self._pubs[topic] = self.create_publisher(Float64, topic, qos)
         self.volume_m3 = None
         self.last_time_s = None
         self.commands_sent = 0
-        self._answer = None   # (state time, command) of the last closed-loop answer
-        self._volume_fresh = False   # a volume arrived since the last answer
-        self._pending = None         # a state's time waiting for its volume
-        best_effort = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self._answer = None  # (state time, command) of the last closed-loop answer
+        self._volume_fresh = False  # a volume arrived since the last answer
+        self._pending = None  # a state's time waiting for its volume
+        best_effort = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT
+        )
         self._timer = None
         clock = self.get_clock()
         # routine time = clock time - origin: 0 for ROS (simulation) time, the start for wall time
         self._origin_ns = 0 if clock.ros_time_is_active else clock.now().nanoseconds
         if self.closed_loop:
-            self.create_subscription(messages.message_class(messages.TOPIC_VELOCITY), messages.TOPIC_VELOCITY,
-                                     self._on_state, best_effort)
+            self.create_subscription(
+                messages.message_class(messages.TOPIC_VELOCITY),
+                messages.TOPIC_VELOCITY,
+                self._on_state,
+                best_effort,
+            )
         else:
             # on the node's clock: fires when /clock (through the TimeSource) passes each period;
             # created while the clock reads 0, so its grid is k / rate_hz of simulated time
             self._timer = self.create_timer(self.period_s, self._on_timer)
-            # backwards jumps (reset, restarted simulator, looping replay) and use_sim_time switches
+            # backwards jumps (reset, restarted simulator, looping replay) and use_sim_time
+            # switches
             self._jump_handle = clock.create_jump_callback(
-                JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=True),
-                post_callback=self._on_time_jump)
-            self.create_timer(STANDBY_PERIOD_S, self._on_standby, clock=Clock(clock_type=ClockType.STEADY_TIME))
+                JumpThreshold(
+                    min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=True
+                ),
+                post_callback=self._on_time_jump,
+            )
+            self.create_timer(
+                STANDBY_PERIOD_S, self._on_standby, clock=Clock(clock_type=ClockType.STEADY_TIME)
+            )
         self.create_subscription(Float64, messages.TOPIC_VOLUME, self._on_volume, best_effort)
-        timing = ('simulated time (use_sim_time: /clock); waiting for /clock' if clock.ros_time_is_active
-                  else 'wall time from now (use_sim_time false)')
+        timing = (
+            'simulated time (use_sim_time: /clock); waiting for /clock'
+            if clock.ros_time_is_active
+            else 'wall time from now (use_sim_time false)'
+        )
         self.get_logger().info(f'routine {config} at {self.rate_hz:g} Hz of {timing}')
 
     def _declare(self, spec: ParamSpec):
@@ -181,7 +229,7 @@ class ControllerNode(Node):
         if self._ready and 'rate_hz' in checked:
             self.rate_hz = checked['rate_hz']
             self.period_s = 1.0 / self.rate_hz
-            if self._timer is not None:    # the new period from now on (not after the old one)
+            if self._timer is not None:  # the new period from now on (not after the old one)
                 self._timer.timer_period_ns = int(self.period_s * 1e9)
                 self._timer.reset()
             self.get_logger().info(f'command rate set to {self.rate_hz:g} Hz of the node clock')
@@ -191,13 +239,17 @@ class ControllerNode(Node):
         if math.isfinite(msg.data):
             self.volume_m3 = float(msg.data)
             self._volume_fresh = True
-            if self._pending is not None:      # the state came first: answer it now
+            if self._pending is not None:  # the state came first: answer it now
                 t, self._pending = self._pending, None
                 self._answer_state(t)
 
     def _on_state(self, msg):
-        """Closed loop: answer this state once the volume of the same publication is in (the two
-        topics may be taken in either order; the simulator publishes nothing else while it waits)."""
+        """
+        Answer this state (closed loop) once the volume of the same publication is in.
+
+        The two topics may be taken in either order; the simulator publishes nothing else
+        while it waits.
+        """
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         if self._volume_fresh:
             self._answer_state(t)
@@ -207,7 +259,9 @@ class ControllerNode(Node):
     def _answer_state(self, t):
         self._volume_fresh = False
         if self._answer is not None and t == self._answer[0]:
-            cmd = self._answer[1]          # a repeated state: the same answer, the routine not stepped twice
+            cmd = self._answer[
+                1
+            ]  # a repeated state: the same answer, the routine not stepped twice
         else:
             self._follow_time(t)
             cmd = self.routine.command(t, self.volume_m3)
@@ -220,8 +274,10 @@ class ControllerNode(Node):
         if self.last_time_s is None:
             self.get_logger().info(f'first state at t={t:.3f} s')
         elif t < self.last_time_s - 1e-9:
-            self.get_logger().warning(f'simulation time went back from {self.last_time_s:.3f} s to {t:.3f} s; '
-                                      'restarting the routine')
+            self.get_logger().warning(
+                f'simulation time went back from {self.last_time_s:.3f} s to {t:.3f} s; '
+                'restarting the routine'
+            )
             self.routine = self._routine_cls.from_config(dict(self.config))
         self.last_time_s = t
 
@@ -231,7 +287,7 @@ class ControllerNode(Node):
     def _on_timer(self):
         """One command per period of the node clock (a jump over several periods sends one)."""
         t = self._routine_time()
-        self._follow_time(t)     # also catches a wall clock stepped back (no jump callback for that)
+        self._follow_time(t)  # also catches a wall clock stepped back (no jump callback for that)
         self._send(t)
 
     def _on_time_jump(self, jump):
@@ -242,17 +298,23 @@ class ControllerNode(Node):
             self._origin_ns = 0 if clock.ros_time_is_active else clock.now().nanoseconds
             self.routine = self._routine_cls.from_config(dict(self.config))
             self.last_time_s = None
-            self.get_logger().info(f'use_sim_time now {clock.ros_time_is_active}: restarting the routine')
+            self.get_logger().info(
+                f'use_sim_time now {clock.ros_time_is_active}: restarting the routine'
+            )
             self._timer.reset()
             return
         t = self._routine_time()
-        self._follow_time(t)          # restarts the routine
-        self._timer.reset()           # next command one period after the new time
-        self._send(t)                 # and the new time is answered at once
+        self._follow_time(t)  # restarts the routine
+        self._timer.reset()  # next command one period after the new time
+        self._send(t)  # and the new time is answered at once
 
     def _on_standby(self):
-        """While the ROS clock reads 0 (no /clock yet, or a simulator held at its start) re-send
-        the command for t = 0: a /clock at 0 moves no clock, so no timer or jump would answer it."""
+        """
+        Re-send the command for t = 0 while the ROS clock reads 0.
+
+        While the ROS clock reads 0 (no /clock yet, or a simulator held at its start) re-send
+        the command for t = 0: a /clock at 0 moves no clock, so no timer or jump would answer it.
+        """
         clock = self.get_clock()
         if clock.ros_time_is_active and clock.now().nanoseconds == 0:
             self._send(0.0)
@@ -272,6 +334,7 @@ class ControllerNode(Node):
 
 def main(args=None):
     from pulsejet_sim.node_main import run_node
+
     return run_node('controller_node', ControllerNode, args)
 
 

@@ -1,13 +1,18 @@
-"""Actuation routines: pure, deterministic state machines that map time (and what they measure) to
-a Command. The controller node and the offline runner drive the same objects."""
+"""
+Actuation routines: pure, deterministic state machines that map time to a Command.
+
+Actuation routines: pure, deterministic state machines that map time (and what they measure) to
+a Command. The controller node and the offline runner drive the same objects.
+"""
+
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 from typing import Any, Mapping
 
 from pulsejet_sim.models.base import Command, ModelError
-from pulsejet_sim.schema import Choice, Number, check_section
+from pulsejet_sim.schema import check_section, Choice, Number
 
 PUMP_VALVE_SPEC = {
     'kind': Choice('pump_valve', ('pump_valve',)),
@@ -26,9 +31,13 @@ INFLATE, HOLD, JET, IDLE, DONE = 'inflate', 'hold', 'jet', 'idle', 'done'
 
 @dataclass
 class PumpValveRoutine:
-    """Inflate (pump on, valve shut) for a time or to a target volume, hold (both off, valve shut),
+    """
+    Inflate, hold, jet, repeat: the pump/valve routine.
+
+    Inflate (pump on, valve shut) for a time or to a target volume, hold (both off, valve shut),
     jet (valve open), repeat. Phases advance on the time it is given, so the same routine gives the
-    same commands live (sim time from /clock) and offline."""
+    same commands live (sim time from /clock) and offline.
+    """
 
     inflate_s: float = 2.0
     target_volume_m3: float = 0.0
@@ -64,8 +73,11 @@ class PumpValveRoutine:
         self.phase_start_s = time_s
 
     def command(self, time_s: float, volume_m3: float | None = None) -> Command:
-        """The command to hold from time_s on. volume_m3 (the measured fluid volume) ends the
-        inflation when target_volume_m3 > 0."""
+        """
+        Return the command to hold from time_s on.
+
+        volume_m3 (the measured fluid volume) ends the inflation when target_volume_m3 > 0.
+        """
         # several phases may end within one call when the caller's rate is coarse
         for _ in range(8):
             if self.phase == IDLE:
@@ -82,7 +94,10 @@ class PumpValveRoutine:
                     done = elapsed >= self.inflate_s
                 if not done:
                     return Command(self.pump_flow_m3_s, 0.0, 0.0)
-                self._enter(HOLD, time_s if self.target_volume_m3 > 0 else self.phase_start_s + self.inflate_s)
+                self._enter(
+                    HOLD,
+                    time_s if self.target_volume_m3 > 0 else self.phase_start_s + self.inflate_s,
+                )
             elif self.phase == HOLD:
                 if time_s - self.phase_start_s < self.hold_s:
                     return Command(0.0, 0.0, 0.0)
@@ -95,7 +110,7 @@ class PumpValveRoutine:
                     self._enter(DONE, self.phase_start_s + self.jet_s)
                 else:
                     self._enter(INFLATE, self.phase_start_s + self.jet_s)
-            else:   # DONE: valve left open so the shell rests unstrained
+            else:  # DONE: valve left open so the shell rests unstrained
                 return Command(0.0, self.valve_opening, 0.0)
         return Command(0.0, self.valve_opening, 0.0)
 
@@ -112,9 +127,13 @@ CABLE_SPEC = {
 
 @dataclass
 class CableRoutine:
-    """Periodic cable pull: a half-cosine rise to amplitude_n over contraction_s, a half-cosine
+    """
+    Periodic cable pull: half-cosine rise, half-cosine release, slack.
+
+    Periodic cable pull: a half-cosine rise to amplitude_n over contraction_s, a half-cosine
     release over release_s, slack for the rest of the period (the shape of the shell model's
-    built-in routine, so live and offline runs pull alike)."""
+    built-in routine, so live and offline runs pull alike).
+    """
 
     amplitude_n: float = 8.0
     frequency_hz: float = 1.6
@@ -124,8 +143,11 @@ class CableRoutine:
 
     def __post_init__(self):
         if self.contraction_s + self.release_s > 1.0 / self.frequency_hz + 1e-12:
-            raise ModelError(f'routine: contraction_s + release_s = {self.contraction_s + self.release_s:g} s '
-                             f'exceeds the period 1/frequency_hz = {1.0 / self.frequency_hz:g} s; allowed: at most the period')
+            raise ModelError(
+                f'routine: contraction_s + release_s = {self.contraction_s + self.release_s:g} s'
+                f' exceeds the period 1/frequency_hz = {1.0 / self.frequency_hz:g} s; allowed: at'
+                ' most the period'
+            )
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any] | None) -> 'CableRoutine':
@@ -156,10 +178,12 @@ ROUTINES = {'pump_valve': PumpValveRoutine, 'cable': CableRoutine}
 
 
 def routine_from_scene(routine: Mapping[str, Any] | None):
-    """The routine a scene asks for (None: hold the scene's initial command)."""
+    """Return the routine a scene asks for (None: hold the scene's initial command)."""
     if routine is None:
         return None
     kind = routine.get('kind', 'pump_valve')
     if kind not in ROUTINES:
-        raise ModelError(f'routine.kind: {kind!r} is not known; allowed: one of {", ".join(ROUTINES)}')
+        raise ModelError(
+            f'routine.kind: {kind!r} is not known; allowed: one of {", ".join(ROUTINES)}'
+        )
     return ROUTINES[kind].from_config(routine)

@@ -1,10 +1,15 @@
 """Shared test set-up."""
+
 import os
 
 
 def isolate_ros(monkeypatch, offset: int) -> int:
-    """A ROS domain of this test run (1..100, from the pid and a per-file offset), localhost
-    discovery only, unbuffered and uncoloured logs for the child processes. Returns the domain."""
+    """
+    Give this test run a ROS domain of its own and return the domain.
+
+    A ROS domain of this test run (1..100, from the pid and a per-file offset), localhost
+    discovery only, unbuffered and uncoloured logs for the child processes. Returns the domain.
+    """
     domain = 1 + (os.getpid() + offset) % 100
     monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')

@@ -1,24 +1,28 @@
-"""BagWriter output checked with independent readers (rosbags, the mcap library), plus crash safety."""
+"""
+BagWriter output checked with independent readers, plus crash safety.
+
+The independent readers: rosbags and the mcap library.
+"""
+
 from __future__ import annotations
 
 import os
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import textwrap
 import time
-from pathlib import Path
 
-import pytest
 from mcap.reader import make_reader
-from rclpy.serialization import serialize_message
-from rosbags.highlevel import AnyReader
-
 from pulsejet_sim import messages
 from pulsejet_sim.bag import msgdefs
-from pulsejet_sim.bag.reader import BagReadError, bag_info, load_series, read_bag, repair
+from pulsejet_sim.bag.reader import bag_info, BagReadError, load_series, read_bag, repair
 from pulsejet_sim.bag.writer import BagError, BagWriter, install_signal_handlers
 from pulsejet_sim.models.base import Command, Observation
+import pytest
+from rclpy.serialization import serialize_message
+from rosbags.highlevel import AnyReader
 
 REPO = Path(__file__).resolve().parents[1]
 N_STEPS = 25
@@ -26,12 +30,24 @@ DT_S = 0.01
 
 
 def observation(i: int) -> Observation:
-    """A distinct, recognisable value per field and step."""
+    """Return a distinct, recognisable value per field and step."""
     t = i * DT_S
-    return Observation(time_s=t, position_m=0.1 * i, velocity_m_s=0.01 * i, acceleration_m_s2=0.0,
-                       mantle_radius_m=0.05 + 1e-4 * i, volume_m3=1e-4 * (1 + i), fluid_mass_kg=0.1 * (1 + i),
-                       thrust_n=0.5 * i, added_mass_force_n=0.0, drag_n=-0.01 * i, jet_speed_m_s=0.0,
-                       cavity_pressure_pa=0.0, pump_flow_m3_s=1e-3, valve_opening=0.5)
+    return Observation(
+        time_s=t,
+        position_m=0.1 * i,
+        velocity_m_s=0.01 * i,
+        acceleration_m_s2=0.0,
+        mantle_radius_m=0.05 + 1e-4 * i,
+        volume_m3=1e-4 * (1 + i),
+        fluid_mass_kg=0.1 * (1 + i),
+        thrust_n=0.5 * i,
+        added_mass_force_n=0.0,
+        drag_n=-0.01 * i,
+        jet_speed_m_s=0.0,
+        cavity_pressure_pa=0.0,
+        pump_flow_m3_s=1e-3,
+        valve_opening=0.5,
+    )
 
 
 def write_run(path: Path, compression: str = 'zstd') -> None:
@@ -46,17 +62,37 @@ def write_run(path: Path, compression: str = 'zstd') -> None:
                 bag.write(topic, serialize_message(msg), log_ns)
             for topic, msg in messages.command_messages(Command(1e-3 * i, 0.5, 2.0 * i)):
                 bag.write(topic, serialize_message(msg), log_ns)
-            bag.write(messages.TOPIC_MANTLE_PROFILE,
-                      serialize_message(messages.profile_message([0.0, 0.01 * (1 + i)], [0.05, -0.05], obs.time_s)),
-                      log_ns)
-            bag.write(messages.TOPIC_APPLIED_COMMAND,
-                      serialize_message(messages.applied_command_message(Command(1e-3 * i, 0.5, 2.0 * i), obs.time_s)),
-                      log_ns)
-            bag.write(messages.TOPIC_CMD_COMMAND,
-                      serialize_message(messages.command_message(Command(1e-3 * i, 0.5, 2.0 * i), obs.time_s)),
-                      log_ns)
-            ledger = {'stored_elastic': 0.25 * i, 'in_actuation_work': 1.0 / 3.0, 'closure_relative': 0.01 * i}
-            bag.write('pulsejet/energy_ledger', serialize_message(messages.ledger_message(ledger, obs.time_s)), log_ns)
+            bag.write(
+                messages.TOPIC_MANTLE_PROFILE,
+                serialize_message(
+                    messages.profile_message([0.0, 0.01 * (1 + i)], [0.05, -0.05], obs.time_s)
+                ),
+                log_ns,
+            )
+            bag.write(
+                messages.TOPIC_APPLIED_COMMAND,
+                serialize_message(
+                    messages.applied_command_message(Command(1e-3 * i, 0.5, 2.0 * i), obs.time_s)
+                ),
+                log_ns,
+            )
+            bag.write(
+                messages.TOPIC_CMD_COMMAND,
+                serialize_message(
+                    messages.command_message(Command(1e-3 * i, 0.5, 2.0 * i), obs.time_s)
+                ),
+                log_ns,
+            )
+            ledger = {
+                'stored_elastic': 0.25 * i,
+                'in_actuation_work': 1.0 / 3.0,
+                'closure_relative': 0.01 * i,
+            }
+            bag.write(
+                'pulsejet/energy_ledger',
+                serialize_message(messages.ledger_message(ledger, obs.time_s)),
+                log_ns,
+            )
 
 
 @pytest.fixture(scope='module')
@@ -69,17 +105,28 @@ def run_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_rosbags_reads_names_types_counts(run_file: Path) -> None:
     with AnyReader([run_file]) as reader:
         found = {c.topic: (c.msgtype, c.msgcount) for c in reader.connections}
-    expected = {(t if t.startswith('/') else '/' + t): (ty, N_STEPS) for t, ty in messages.TOPIC_TYPES.items()}
+    expected = {
+        (t if t.startswith('/') else '/' + t): (ty, N_STEPS)
+        for t, ty in messages.TOPIC_TYPES.items()
+    }
     assert found == expected
 
 
 def test_rosbags_decodes_every_message_from_stored_definitions(run_file: Path) -> None:
-    """AnyReader builds its types only from the definitions in the file, so decoding every
-    message proves the definitions are complete (incl. Header and builtin_interfaces/Time)."""
+    """
+    Every message decodes with rosbags from the definitions stored in the file.
+
+    AnyReader builds its types only from the definitions in the file, so decoding every
+    message proves the definitions are complete (incl. Header and builtin_interfaces/Time).
+    """
     values: dict[str, list] = {}
     with AnyReader([run_file]) as reader:
-        assert {'std_msgs/msg/Header', 'builtin_interfaces/msg/Time', 'geometry_msgs/msg/Vector3',
-                'diagnostic_msgs/msg/KeyValue'} <= set(reader.typestore.fielddefs)
+        assert {
+            'std_msgs/msg/Header',
+            'builtin_interfaces/msg/Time',
+            'geometry_msgs/msg/Vector3',
+            'diagnostic_msgs/msg/KeyValue',
+        } <= set(reader.typestore.fielddefs)
         for conn, log_ns, raw in reader.messages():
             msg = reader.deserialize(raw, conn.msgtype)
             values.setdefault(conn.topic, []).append((log_ns, msg))
@@ -100,7 +147,7 @@ def test_rosbags_decodes_every_message_from_stored_definitions(run_file: Path) -
         status = values['/pulsejet/energy_ledger'][i][1].status[0]
         assert status.name == 'pulsejet energy ledger'
         kv = {x.key: x.value for x in status.values}
-        assert float(kv['in_actuation_work']) == 1.0 / 3.0        # repr keeps the exact float
+        assert float(kv['in_actuation_work']) == 1.0 / 3.0  # repr keeps the exact float
         assert status.level == (0 if 0.01 * i <= 0.05 else 1)
 
 
@@ -109,7 +156,9 @@ def test_mcap_layout_matches_rosbag2(run_file: Path) -> None:
         reader = make_reader(fh)
         assert reader.get_header().profile == 'ros2'
         summary = reader.get_summary()
-        assert summary is not None and summary.statistics.message_count == N_STEPS * len(messages.TOPIC_TYPES)
+        assert summary is not None and summary.statistics.message_count == N_STEPS * len(
+            messages.TOPIC_TYPES
+        )
         assert {s.encoding for s in summary.schemas.values()} == {'ros2msg'}
         assert {c.message_encoding for c in summary.channels.values()} == {'cdr'}
         for channel in summary.channels.values():
@@ -118,13 +167,20 @@ def test_mcap_layout_matches_rosbag2(run_file: Path) -> None:
         assert summary.chunk_indexes and {c.compression for c in summary.chunk_indexes} == {'zstd'}
         names = [m.name for m in reader.iter_metadata()]
         assert names == ['rosbag2']
-    schema = next(s for s in summary.schemas.values() if s.name == 'geometry_msgs/msg/TwistStamped')
+    schema = next(
+        s for s in summary.schemas.values() if s.name == 'geometry_msgs/msg/TwistStamped'
+    )
     text = schema.data.decode()
     sep = '\n' + '=' * 80 + '\n'
-    assert text.startswith((msgdefs.find_share_dir('geometry_msgs') / 'msg/TwistStamped.msg').read_text())
+    assert text.startswith(
+        (msgdefs.find_share_dir('geometry_msgs') / 'msg/TwistStamped.msg').read_text()
+    )
     assert [part.split('\n', 1)[0] for part in text.split(sep)[1:]] == [
-        'MSG: geometry_msgs/Twist', 'MSG: geometry_msgs/Vector3', 'MSG: std_msgs/Header',
-        'MSG: builtin_interfaces/Time']
+        'MSG: geometry_msgs/Twist',
+        'MSG: geometry_msgs/Vector3',
+        'MSG: std_msgs/Header',
+        'MSG: builtin_interfaces/Time',
+    ]
 
 
 def test_lz4_chunks_readable_by_rosbags(tmp_path: Path) -> None:
@@ -140,7 +196,9 @@ def test_own_reader_and_series(run_file: Path) -> None:
     assert rows[3][1] == 'geometry_msgs/msg/WrenchStamped' and rows[3][3].wrench.force.x == 1.5
     series = load_series(run_file)
     t, v = series['/pulsejet/velocity']
-    assert t[-1] == pytest.approx((N_STEPS - 1) * DT_S) and v[-1] == pytest.approx(0.01 * (N_STEPS - 1))
+    assert t[-1] == pytest.approx((N_STEPS - 1) * DT_S) and v[-1] == pytest.approx(
+        0.01 * (N_STEPS - 1)
+    )
     t, v = series['/pulsejet/volume']
     assert t[2] == pytest.approx(2 * DT_S) and v[2] == pytest.approx(3e-4)
     assert '/pulsejet/energy_ledger' not in series
@@ -153,8 +211,10 @@ def test_headerless_topics_mapped_to_sim_time_through_clock(tmp_path: Path) -> N
     with BagWriter(path) as bag:
         for i in range(10):
             sim_s = 5.0 + 0.1 * i
-            wall = wall0 + i * 50_000_000       # half real time: 0.05 s wall per 0.1 s sim
-            bag.write_message('/clock', messages.message_class('/clock')(clock=messages.stamp(sim_s)), wall)
+            wall = wall0 + i * 50_000_000  # half real time: 0.05 s wall per 0.1 s sim
+            bag.write_message(
+                '/clock', messages.message_class('/clock')(clock=messages.stamp(sim_s)), wall
+            )
             volume = messages.message_class('pulsejet/volume')(data=float(i))
             bag.write_message('pulsejet/volume', volume, wall + 25_000_000)
     t, v = load_series(path)['/pulsejet/volume']
@@ -162,15 +222,17 @@ def test_headerless_topics_mapped_to_sim_time_through_clock(tmp_path: Path) -> N
 
 
 def test_stamp_rounding_and_ledger_levels() -> None:
-    t = messages.stamp(1.9999999999)                  # rounds up to the next second, not nanosec=1e9
+    t = messages.stamp(1.9999999999)  # rounds up to the next second, not nanosec=1e9
     assert (t.sec, t.nanosec) == (2, 0)
     assert messages.stamp_ns(0.25) == 250_000_000
     with pytest.raises(ValueError, match='time_s=-1.0'):
         messages.stamp(-1.0)
-    levels = {c: messages.ledger_message({'closure_relative': c}, 0.0).status[0].level
-              for c in (0.0, 0.05, -0.051, float('nan'))}
+    levels = {
+        c: messages.ledger_message({'closure_relative': c}, 0.0).status[0].level
+        for c in (0.0, 0.05, -0.051, float('nan'))
+    }
     assert [levels[c] for c in (0.0, 0.05, -0.051)] == [b'\x00', b'\x00', b'\x01']
-    assert list(levels.values())[-1] == b'\x01'      # not finite -> WARN
+    assert list(levels.values())[-1] == b'\x01'  # not finite -> WARN
     ledger = {'in_actuation_work': 0.1 + 0.2, 'out_drag': 1e-17}
     assert messages.ledger_from_message(messages.ledger_message(ledger, 1.0)) == ledger
 
@@ -205,15 +267,16 @@ def test_reader_rejects_non_mcap(tmp_path: Path) -> None:
         list(read_bag(tmp_path / 'missing.mcap'))
 
 
-# --- crash safety: a child process writing when it gets a signal -----------------------------------
+# --- crash safety: a child process writing when it gets a signal ---------------------------------
 
-CHILD = textwrap.dedent('''
+CHILD = textwrap.dedent("""
     import signal, sys, time
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Float64
     from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
     bag = BagWriter(sys.argv[1], chunk_size_bytes=4096, flush_period_s=0.2)
-    # a background job of a non-interactive shell (CI) inherits SIGINT ignored: ask for Python's own
+    # a background job of a non-interactive shell (CI) inherits SIGINT ignored:
+    # ask for Python's own
     signal.signal(signal.SIGINT, signal.default_int_handler)
     install_signal_handlers(bag)
     bag.add_topic('pulsejet/volume', 'std_msgs/msg/Float64')
@@ -229,15 +292,20 @@ CHILD = textwrap.dedent('''
                 time.sleep(0.0002)
     except KeyboardInterrupt:
         print('interrupted', bag.message_counts['/pulsejet/volume'], bag.closed, flush=True)
-''')
+""")
 
 
 def start_child(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
     path = tmp_path / 'child.mcap'
     script = tmp_path / 'child.py'
     script.write_text(CHILD)
-    proc = subprocess.Popen([sys.executable, str(script), str(path)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=REPO)
+    proc = subprocess.Popen(
+        [sys.executable, str(script), str(path)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+    )
     assert proc.stdout.readline().strip() == 'ready', proc.stderr.read()
     time.sleep(0.2)
     return proc, path
@@ -266,7 +334,7 @@ def test_sigterm_mid_write_leaves_complete_file(tmp_path: Path) -> None:
     proc, path = start_child(tmp_path)
     proc.send_signal(signal.SIGTERM)
     proc.communicate(timeout=10)
-    assert proc.returncode == -signal.SIGTERM        # still dies by the signal, as without the bag
+    assert proc.returncode == -signal.SIGTERM  # still dies by the signal, as without the bag
     values = rosbags_values(path)
     assert len(values) > 2000 and values == [float(i) for i in range(len(values))]
 
@@ -274,7 +342,7 @@ def test_sigterm_mid_write_leaves_complete_file(tmp_path: Path) -> None:
 @pytest.mark.timeout(30)
 def test_hard_kill_loses_at_most_the_open_chunk_and_repairs(tmp_path: Path) -> None:
     proc, path = start_child(tmp_path)
-    time.sleep(0.3)                                   # > flush_period_s: chunks are on disk
+    time.sleep(0.3)  # > flush_period_s: chunks are on disk
     proc.kill()
     proc.communicate(timeout=10)
     info = bag_info(path)

@@ -1,21 +1,24 @@
-"""`pulsejet sweep` on Dask: a real distributed.LocalCluster with worker processes reproduces the
+"""
+`pulsejet sweep` on Dask reproduces the local process pool's CSV row for row.
+
+`pulsejet sweep` on Dask: a real distributed.LocalCluster with worker processes reproduces the
 local process pool's CSV row for row.
 
 The CSVs are written with timing=False (`--no-timing`): wall_s is the one column that differs
 between two runs of the same sweep; with it left out the files must be byte-identical. The
 columns with timing are compared too, all but wall_s.
 """
+
 from __future__ import annotations
 
 import csv
 import os
 from pathlib import Path
 
+from pulsejet_sim.sweep import load_sweep, open_executor, run_sweep, write_csv
 import pytest
 
 distributed = pytest.importorskip('distributed')
-
-from pulsejet_sim.sweep import load_sweep, open_executor, run_sweep, write_csv  # noqa: E402
 
 SWEEP = """
 name: dask_check
@@ -40,8 +43,9 @@ studies:
 
 @pytest.fixture(scope='module')
 def cluster():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=':0') as c:
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=':0'
+    ) as c:
         yield c
 
 
@@ -83,16 +87,31 @@ def test_local_cluster_reproduces_the_process_pool_csv(cluster, sweep_file, pool
     assert rows_without(timed, 'wall_s') == rows_without(pool_timed, 'wall_s')
     table = list(csv.DictReader(open(plain)))
     assert len(table) == 7 and 'wall_s' not in table[0]
-    assert all(r['peak_speed_m_s'] for r in table if r['study'] == 'escape')     # real runs, not empty rows
+    assert all(
+        r['peak_speed_m_s'] for r in table if r['study'] == 'escape'
+    )  # real runs, not empty rows
     assert table[-1]['fault'].startswith('refused:') and 'stiffness_n_m' in table[-1]['fault']
 
 
 @pytest.mark.timeout(120)
 def test_cli_sweep_on_a_scheduler_address(cluster, sweep_file, pool_csv, tmp_path, capsys):
     from pulsejet_sim.cli import main
+
     out = tmp_path / 'cli'
-    assert main(['sweep', str(sweep_file), '--scheduler', cluster.scheduler_address, '--out', str(out),
-                 '--no-timing']) == 0
+    assert (
+        main(
+            [
+                'sweep',
+                str(sweep_file),
+                '--scheduler',
+                cluster.scheduler_address,
+                '--out',
+                str(out),
+                '--no-timing',
+            ]
+        )
+        == 0
+    )
     assert f'the Dask scheduler {cluster.scheduler_address}' in capsys.readouterr().out
     assert (out / 'dask_check.csv').read_text() == pool_csv[0].read_text()
     assert (out / 'dask_check.png').stat().st_size > 0
@@ -100,7 +119,11 @@ def test_cli_sweep_on_a_scheduler_address(cluster, sweep_file, pool_csv, tmp_pat
 
 def test_cli_refuses_both_executors(sweep_file, capsys):
     from pulsejet_sim.cli import main
-    assert main(['sweep', str(sweep_file), '--scheduler', 'tcp://127.0.0.1:1', '--dask-workers', '2']) == 2
+
+    assert (
+        main(['sweep', str(sweep_file), '--scheduler', 'tcp://127.0.0.1:1', '--dask-workers', '2'])
+        == 2
+    )
     assert 'exclude each other' in capsys.readouterr().err
     assert main(['sweep', str(sweep_file), '--dask-workers', '0']) == 2
     assert '--dask-workers 0 rejected' in capsys.readouterr().err

@@ -1,58 +1,82 @@
-"""Property-based tests (hypothesis) of the inputs a user hands pulsejet: scene files, command
-sequences into Simulation, sweep files.
+"""
+Property-based tests (hypothesis) of the inputs a user hands pulsejet.
+
+Scene files, command sequences into Simulation, sweep files.
 
 Each property is a `check_*` function returning an outcome label, so that
 benchmarks/reliability_table.py runs the same generators at a larger example count and tabulates
 the outcomes (docs/RELIABILITY.md). Example counts here are bounded to keep `make test` fast.
 
-- scene files (valid and invalid: wrong types, missing keys, out-of-range, unknown keys, YAML that is
-  not a mapping): either the scene runs with finite observations and a finite ledger that closes,
-  or it is refused with a SceneError naming the key and what is allowed; never another exception.
+- scene files (valid and invalid: wrong types, missing keys, out-of-range, unknown keys, YAML that
+  is not a mapping): either the scene runs with finite observations and a finite ledger that
+  closes, or it is refused with a SceneError naming the key and what is allowed; never another
+  exception.
 - command sequences (any float, NaN, +-inf, 1e308, negative, rapid toggling) into `Simulation`:
   each command is validated (Command.validate) and applied or rejected with a CommandError naming
   the value and the allowed range; a rejected command changes nothing; no observation is ever
   non-finite (a blow-up stops the run at its last good, finite state).
 - sweep files: loaded or refused with SweepError / a YAML error (what `pulsejet sweep` reports).
 """
+
 from __future__ import annotations
 
 import copy
+from dataclasses import fields
 import math
 import os
-import re
-from dataclasses import fields
 from pathlib import Path
+import re
 from typing import Any
 
+from hypothesis import given, HealthCheck, settings
+from hypothesis import strategies as st
+from pulsejet_sim.models.base import Command, CommandError, Observation, SimulationBlowUp
+from pulsejet_sim.scene import load_scene, load_scene_data, SceneError
+from pulsejet_sim.simulation import Simulation
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
-
-from pulsejet_sim.models.base import Command, CommandError, Observation, SimulationBlowUp
-from pulsejet_sim.scene import SceneError, load_scene, load_scene_data
-from pulsejet_sim.simulation import Simulation
 
 EXAMPLES = int(os.environ.get('PULSEJET_FUZZ_EXAMPLES', '40'))
-FUZZ_SETTINGS = settings(max_examples=EXAMPLES, deadline=None, derandomize=False,
-                         suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture,
-                                                HealthCheck.data_too_large])
+FUZZ_SETTINGS = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    derandomize=False,
+    suppress_health_check=[
+        HealthCheck.too_slow,
+        HealthCheck.function_scoped_fixture,
+        HealthCheck.data_too_large,
+    ],
+)
 BASE_NAMES = ('escape', 'pump_cycle', 'shell_robot', 'shell_cone', 'shell_ellipsoid')
 BASES: dict[str, dict] = {name: load_scene_data(name)[0] for name in BASE_NAMES}
-RUN_STEPS = 40                      # physics steps a valid scene is run for (in batches of RUN_BATCH)
+RUN_STEPS = 40  # physics steps a valid scene is run for (in batches of RUN_BATCH)
 RUN_BATCH = 8
-CLOSURE_TOL = 0.05                  # |closure_relative| allowed after a short run (shell: Newton tolerance)
-SAFETY_NET = 'please report'        # scene.py's catch-all: a value the model's own validation missed
-# every lumped terms/options combination compiles its own numba kernel (seconds each): the fast test
-# steps only the bases' combinations; the reliability script sets PULSEJET_FUZZ_ALL_FLAGS=1
+CLOSURE_TOL = 0.05  # |closure_relative| allowed after a short run (shell: Newton tolerance)
+SAFETY_NET = 'please report'  # scene.py's catch-all: a value the model's own validation missed
+# every lumped terms/options combination compiles its own numba kernel (seconds each): the fast
+# test steps only the bases' combinations; the reliability script sets PULSEJET_FUZZ_ALL_FLAGS=1
 ALL_FLAGS = os.environ.get('PULSEJET_FUZZ_ALL_FLAGS') == '1'
-_BASE_LUMPED_FLAGS = {load_scene(n).model.flags for n in BASE_NAMES if BASES[n]['model'] == 'lumped'}
+_BASE_LUMPED_FLAGS = {
+    load_scene(n).model.flags for n in BASE_NAMES if BASES[n]['model'] == 'lumped'
+}
 
-SPECIAL_FLOATS = [math.nan, math.inf, -math.inf, 1e308, -1e308, 5e-324, -0.0, 0.0, -1.0, 1e-12, 1e12]
+SPECIAL_FLOATS = [
+    math.nan,
+    math.inf,
+    -math.inf,
+    1e308,
+    -1e308,
+    5e-324,
+    -0.0,
+    0.0,
+    -1.0,
+    1e-12,
+    1e12,
+]
 WEIRD_VALUES = st.one_of(
     st.sampled_from(SPECIAL_FLOATS),
     st.floats(allow_nan=True, allow_infinity=True),
-    st.integers(min_value=-10**30, max_value=10**30),
+    st.integers(min_value=-(10**30), max_value=10**30),
     st.text(max_size=12),
     st.none(),
     st.booleans(),
@@ -90,13 +114,26 @@ def _get(data: dict, path: tuple) -> Any:
 
 @st.composite
 def scene_texts(draw) -> tuple[str, str, list]:
-    """(YAML text, base name, mutations): a base scene with 0-3 mutations, or a non-mapping file."""
+    """
+    Draw a base scene with 0-3 mutations, or a non-mapping file.
+
+    Gives (YAML text, base name, mutations).
+    """
     base = draw(st.sampled_from(BASE_NAMES))
-    if draw(st.integers(0, 9)) == 0:   # not a mapping at all, or not YAML
-        text = draw(st.one_of(
-            st.just(''), st.just('- a\n- b\n'), st.just('42\n'), st.just('"text"\n'), st.just('{a: [1, 2\n'),
-            st.just('model: lumped\n  bad indent: 1\n'), st.just('!!python/object/apply:os.system ["true"]\n'),
-            st.just('a: &x [*x]\n'), st.text(max_size=40)))
+    if draw(st.integers(0, 9)) == 0:  # not a mapping at all, or not YAML
+        text = draw(
+            st.one_of(
+                st.just(''),
+                st.just('- a\n- b\n'),
+                st.just('42\n'),
+                st.just('"text"\n'),
+                st.just('{a: [1, 2\n'),
+                st.just('model: lumped\n  bad indent: 1\n'),
+                st.just('!!python/object/apply:os.system ["true"]\n'),
+                st.just('a: &x [*x]\n'),
+                st.text(max_size=40),
+            )
+        )
         return text, base, [('file', text)]
     data = copy.deepcopy(BASES[base])
     paths = leaf_paths(data)
@@ -111,8 +148,12 @@ def scene_texts(draw) -> tuple[str, str, list]:
         if kind == 'weird':
             value = draw(WEIRD_VALUES)
             _set(data, path, value)
-        elif kind == 'scale' and isinstance(current, (int, float)) and not isinstance(current, bool):
-            value = current * draw(st.sampled_from([-1.0, 0.0, 1e-3, 0.5, 0.9, 1.1, 2.0, 10.0, 1e3]))
+        elif (
+            kind == 'scale' and isinstance(current, (int, float)) and not isinstance(current, bool)
+        ):
+            value = current * draw(
+                st.sampled_from([-1.0, 0.0, 1e-3, 0.5, 0.9, 1.1, 2.0, 10.0, 1e3])
+            )
             if isinstance(current, int):
                 value = int(value)
             _set(data, path, value)
@@ -125,7 +166,7 @@ def scene_texts(draw) -> tuple[str, str, list]:
                 continue
             value = draw(st.sampled_from(['bogus_key', 'Duration_s', 'stiffness', 'dt']))
             parent[value] = draw(st.integers(0, 3))
-        else:   # replace a whole section by something that is not a mapping
+        else:  # replace a whole section by something that is not a mapping
             value = draw(st.sampled_from([[], [1, 2], 'text', 0, True]))
             _set(data, path[:1], value)
             path = path[:1]
@@ -134,7 +175,11 @@ def scene_texts(draw) -> tuple[str, str, list]:
 
 
 def _finite_observation(obs: Observation, where: str) -> None:
-    bad = {f.name: getattr(obs, f.name) for f in fields(obs) if not math.isfinite(getattr(obs, f.name))}
+    bad = {
+        f.name: getattr(obs, f.name)
+        for f in fields(obs)
+        if not math.isfinite(getattr(obs, f.name))
+    }
     assert not bad, f'{where}: non-finite observation {bad}'
 
 
@@ -151,19 +196,28 @@ def _type_error(mutation: tuple) -> bool:
 
 def _refusal_ok(message: str, mutations: list) -> None:
     assert SAFETY_NET not in message, f'validation gap (model raised a raw exception): {message}'
-    assert 'allowed' in message or 'not found' in message, f'refusal does not say what is allowed: {message}'
+    assert (
+        'allowed' in message or 'not found' in message
+    ), f'refusal does not say what is allowed: {message}'
     assert 'Traceback' not in message
     assert len(message) < 2000, f'refusal message of {len(message)} characters'
-    # a single wrong type, non-finite number or unknown key is reported at that key (a finite number
-    # may be refused by a rule across keys, which names the other key)
-    if len(mutations) == 1 and mutations[0][0] in ('weird', 'unknown') and _type_error(mutations[0]):
-        key = mutations[0][1].split('.')[-1] if mutations[0][0] == 'weird' else str(mutations[0][2])
+    # a single wrong type, non-finite number or unknown key is reported at that key (a finite
+    # number may be refused by a rule across keys, which names the other key)
+    if (
+        len(mutations) == 1
+        and mutations[0][0] in ('weird', 'unknown')
+        and _type_error(mutations[0])
+    ):
+        key = (
+            mutations[0][1].split('.')[-1] if mutations[0][0] == 'weird' else str(mutations[0][2])
+        )
         assert key in message or mutations[0][1].split('.')[0] in message, (mutations, message)
 
 
 def run_scene_briefly(scene) -> str:
     """Step a built scene RUN_STEPS steps with its routine's commands; 'ran' or 'fault'."""
     from pulsejet_ctrl.routines import routine_from_scene
+
     sim = Simulation(scene.model)
     _finite_observation(sim.observe(), 'initial state')
     routine = routine_from_scene(scene.routine)
@@ -181,10 +235,13 @@ def run_scene_briefly(scene) -> str:
     ledger = sim.energy_ledger()
     bad = {k: v for k, v in ledger.items() if not math.isfinite(v)}
     assert not bad, f'non-finite ledger entries {bad}'
-    scale = max(abs(ledger.get('in_initial', 0.0)) + abs(ledger.get('in_actuation_work', 0.0)), 1e-9)
+    scale = max(
+        abs(ledger.get('in_initial', 0.0)) + abs(ledger.get('in_actuation_work', 0.0)), 1e-9
+    )
     if scale > 1e-6:
-        assert abs(ledger['closure_error']) <= CLOSURE_TOL * scale + 1e-9, \
-            f'ledger does not close: closure_error {ledger["closure_error"]:g} J of {scale:g} J in'
+        assert (
+            abs(ledger['closure_error']) <= CLOSURE_TOL * scale + 1e-9
+        ), f'ledger does not close: closure_error {ledger["closure_error"]:g} J of {scale:g} J in'
     return 'ran'
 
 
@@ -200,7 +257,11 @@ def check_scene_text(text: str, mutations: list, tmp_dir: Path) -> str:
     for attr in ('duration_s', 'publish_rate_hz'):
         assert math.isfinite(getattr(scene, attr)) and getattr(scene, attr) > 0
     assert math.isfinite(scene.model.dt_s) and scene.model.dt_s > 0
-    if scene.model.name == 'lumped' and scene.model.flags not in _BASE_LUMPED_FLAGS and not ALL_FLAGS:
+    if (
+        scene.model.name == 'lumped'
+        and scene.model.flags not in _BASE_LUMPED_FLAGS
+        and not ALL_FLAGS
+    ):
         return 'built'
     return run_scene_briefly(scene)
 
@@ -213,13 +274,16 @@ def test_scene_files_run_or_are_refused_clearly(case, tmp_path_factory) -> None:
     check_scene_text(text, mutations, tmp_path_factory.mktemp('scene'))
 
 
-@pytest.mark.parametrize('text, key', [
-    ('model: lumped\n', 'geometry.rest_minor_semi_axis_m'),
-    ('- 1\n- 2\n', 'list'),
-    ('', 'NoneType'),
-    ('model: [lumped]\n', 'model'),
-    ('model: shell\nsimulation: 3\n', 'simulation'),
-])
+@pytest.mark.parametrize(
+    'text, key',
+    [
+        ('model: lumped\n', 'geometry.rest_minor_semi_axis_m'),
+        ('- 1\n- 2\n', 'list'),
+        ('', 'NoneType'),
+        ('model: [lumped]\n', 'model'),
+        ('model: shell\nsimulation: 3\n', 'simulation'),
+    ],
+)
 def test_scene_refusals_name_the_key(tmp_path: Path, text: str, key: str) -> None:
     path = tmp_path / 's.yaml'
     path.write_text(text)
@@ -230,7 +294,11 @@ def test_scene_refusals_name_the_key(tmp_path: Path, text: str, key: str) -> Non
 
 def test_publish_rate_and_duration_are_validated_for_every_model(tmp_path: Path) -> None:
     for base in ('shell_robot', 'escape'):
-        for key, value in (('publish_rate_hz', 'fast'), ('publish_rate_hz', -5), ('duration_s', 0)):
+        for key, value in (
+            ('publish_rate_hz', 'fast'),
+            ('publish_rate_hz', -5),
+            ('duration_s', 0),
+        ):
             data = copy.deepcopy(BASES[base])
             data['simulation'][key] = value
             path = tmp_path / 's.yaml'
@@ -248,7 +316,7 @@ def test_bad_routine_is_refused_at_load(tmp_path: Path) -> None:
         load_scene(path)
 
 
-# ---- commands into Simulation ---------------------------------------------------------------------
+# ---- commands into Simulation -------------------------------------------------------------------
 COMMAND_VALUES = st.one_of(
     st.sampled_from(SPECIAL_FLOATS + [0.05, 0.0500001, 1.0, 1.0000001, 1000.0, 1000.5, 0.5, 1e-3]),
     st.floats(allow_nan=True, allow_infinity=True),
@@ -268,7 +336,11 @@ def _simulation(name: str) -> Simulation:
 
 
 def check_command_sequence(name: str, commands: list[Command], steps: int) -> tuple[int, int, str]:
-    """Apply each command as sim_node does (validate, then step); returns (applied, rejected, outcome)."""
+    """
+    Apply each command as sim_node does (validate, then step).
+
+    Returns (applied, rejected, outcome).
+    """
     sim = _simulation(name)
     applied = rejected = 0
     for command in commands:
@@ -277,7 +349,9 @@ def check_command_sequence(name: str, commands: list[Command], steps: int) -> tu
             valid = command.validate()
         except CommandError as err:
             text = str(err)
-            assert 'allowed' in text and '=' in text and any(f.name in text for f in fields(Command)), text
+            assert (
+                'allowed' in text and '=' in text and any(f.name in text for f in fields(Command))
+            ), text
             assert (sim.steps, sim.command) == before[1:] and (sim.state == before[0]).all()
             rejected += 1
             continue
@@ -299,9 +373,14 @@ def check_command_sequence(name: str, commands: list[Command], steps: int) -> tu
 
 @pytest.mark.timeout(120)
 @FUZZ_SETTINGS
-@given(name=st.sampled_from(['escape', 'pump_cycle', 'shell_robot', 'shell_cone']),
-       commands=st.lists(COMMANDS, min_size=1, max_size=12), steps=st.sampled_from([1, 2, 5]))
-def test_command_sequences_are_applied_or_rejected(name: str, commands: list[Command], steps: int) -> None:
+@given(
+    name=st.sampled_from(['escape', 'pump_cycle', 'shell_robot', 'shell_cone']),
+    commands=st.lists(COMMANDS, min_size=1, max_size=12),
+    steps=st.sampled_from([1, 2, 5]),
+)
+def test_command_sequences_are_applied_or_rejected(
+    name: str, commands: list[Command], steps: int
+) -> None:
     check_command_sequence(name, commands, steps)
 
 
@@ -317,14 +396,24 @@ def test_rapid_toggling_between_extremes(name: str, period: int) -> None:
     assert rejected == 0
 
 
-@pytest.mark.parametrize('command', [Command(5e-324, 5e-324, 5e-324), Command(1e-154, 1e-154, 0.0),
-                                     Command(0.05, 1e-300, 1000.0)])
+@pytest.mark.parametrize(
+    'command',
+    [Command(5e-324, 5e-324, 5e-324), Command(1e-154, 1e-154, 0.0), Command(0.05, 1e-300, 1000.0)],
+)
 def test_pin_hole_valve_is_rejected_not_simulated(command: Command) -> None:
-    """Found by this file's fuzzing: a valve opening below ~1e-150 made the lumped model's orifice
-    loss overflow (cavity pressure NaN in the observation). Such openings are now refused."""
-    with pytest.raises(CommandError, match=r'valve_opening=.*allowed: 0 \(shut\) or a finite value in \[1e-09'):
+    """
+    A pin-hole valve opening is refused instead of overflowing the orifice loss.
+
+    Found by this file's fuzzing: a valve opening below ~1e-150 made the lumped model's orifice
+    loss overflow (cavity pressure NaN in the observation). Such openings are now refused.
+    """
+    with pytest.raises(
+        CommandError, match=r'valve_opening=.*allowed: 0 \(shut\) or a finite value in \[1e-09'
+    ):
         command.validate()
-    applied, rejected, _ = check_command_sequence('pump_cycle', [command, Command(0.01, 0.0, 0.0)], 2)
+    applied, rejected, _ = check_command_sequence(
+        'pump_cycle', [command, Command(0.01, 0.0, 0.0)], 2
+    )
     assert (applied, rejected) == (1, 1)
 
 
@@ -338,28 +427,53 @@ def test_pin_hole_initial_valve_is_refused_in_scenes(tmp_path: Path) -> None:
             load_scene(path)
 
 
-@pytest.mark.parametrize('field, value, allowed', [
-    ('pump_flow_m3_s', math.nan, '[0.0, 0.05]'), ('valve_opening', math.inf, '[0.0, 1.0]'),
-    ('cable_force_n', -1e308, '[0.0, 1000.0]'), ('pump_flow_m3_s', '0.01', '[0.0, 0.05]'),
-    ('valve_opening', True, '[0.0, 1.0]'), ('cable_force_n', None, '[0.0, 1000.0]'),
-])
+@pytest.mark.parametrize(
+    'field, value, allowed',
+    [
+        ('pump_flow_m3_s', math.nan, '[0.0, 0.05]'),
+        ('valve_opening', math.inf, '[0.0, 1.0]'),
+        ('cable_force_n', -1e308, '[0.0, 1000.0]'),
+        ('pump_flow_m3_s', '0.01', '[0.0, 0.05]'),
+        ('valve_opening', True, '[0.0, 1.0]'),
+        ('cable_force_n', None, '[0.0, 1000.0]'),
+    ],
+)
 def test_command_validation_names_value_and_range(field: str, value: Any, allowed: str) -> None:
     with pytest.raises(CommandError) as err:
         Command(**{field: value}).validate()
     assert f'{field}={value!r}' in str(err.value) and allowed in str(err.value)
 
 
-# ---- sweep files ----------------------------------------------------------------------------------
-SWEEP_BASE = {'name': 'fuzz', 'duration_s': 0.1, 'metric': 'peak_speed_m_s',
-              'studies': {'s': {'base': 'escape', 'axes': {'k': {'a': {'material': {'stiffness_n_m': 1000}},
-                                                                   'b': {'material': {'stiffness_n_m': 2000}}}}}}}
+# ---- sweep files --------------------------------------------------------------------------------
+SWEEP_BASE = {
+    'name': 'fuzz',
+    'duration_s': 0.1,
+    'metric': 'peak_speed_m_s',
+    'studies': {
+        's': {
+            'base': 'escape',
+            'axes': {
+                'k': {
+                    'a': {'material': {'stiffness_n_m': 1000}},
+                    'b': {'material': {'stiffness_n_m': 2000}},
+                }
+            },
+        }
+    },
+}
 
 
 @st.composite
 def sweep_texts(draw) -> str:
     if draw(st.integers(0, 7)) == 0:
-        return draw(st.one_of(st.just(''), st.just('[1, 2]\n'), st.just('studies: {a: &x [*x]}\n'),
-                              st.text(max_size=30)))
+        return draw(
+            st.one_of(
+                st.just(''),
+                st.just('[1, 2]\n'),
+                st.just('studies: {a: &x [*x]}\n'),
+                st.text(max_size=30),
+            )
+        )
     data = copy.deepcopy(SWEEP_BASE)
     for _ in range(draw(st.integers(1, 3))):
         path = draw(st.sampled_from(leaf_paths(data) or [('name',)]))
@@ -379,9 +493,14 @@ def sweep_texts(draw) -> str:
 
 
 def check_sweep_text(text: str, tmp_dir: Path) -> str:
-    """'refused' (SweepError / YAML error, what `pulsejet sweep` prints) or 'loaded'; every run of a
-    loaded sweep then loads its scene or is refused with SceneError. Anything else raises."""
-    from pulsejet_sim.sweep import SweepError, load_sweep
+    """
+    Load a sweep text and tell whether it was refused or loaded.
+
+    'refused' (SweepError / YAML error, what `pulsejet sweep` prints) or 'loaded'; every run of a
+    loaded sweep then loads its scene or is refused with SceneError. Anything else raises.
+    """
+    from pulsejet_sim.sweep import load_sweep, SweepError
+
     path = tmp_dir / 'fuzz_sweep.yaml'
     path.write_text(text)
     try:
@@ -407,7 +526,8 @@ def test_sweep_files_load_or_are_refused(text: str, tmp_path_factory) -> None:
 
 @pytest.mark.parametrize('axis', [1, {'a': 1}, {'a': 'text'}])
 def test_sweep_axis_that_is_not_a_mapping_is_refused(tmp_path: Path, axis: Any) -> None:
-    from pulsejet_sim.sweep import SweepError, load_sweep
+    from pulsejet_sim.sweep import load_sweep, SweepError
+
     data = copy.deepcopy(SWEEP_BASE)
     data['studies']['s']['axes']['k'] = axis
     path = tmp_path / 'sweep.yaml'

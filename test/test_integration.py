@@ -1,27 +1,31 @@
-"""End to end: sim_node + controller_node processes, every topic recorded to MCAP, read back with rosbags.
+"""
+End to end: sim_node + controller_node processes, recorded to MCAP.
+
+Every topic is recorded to MCAP and read back with rosbags.
 
 Runs in a ROS domain derived from the pytest pid with localhost-only discovery; a short simulated
 duration at real_time_factor > 1 keeps it well under a minute.
 """
+
 from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
+from conftest import isolate_ros
 import numpy as np
 import pytest
-from conftest import isolate_ros
 
 rclpy = pytest.importorskip('rclpy')
 from rosbags.highlevel import AnyReader  # noqa: E402
 
 DOMAIN_OFFSET = 37
-DURATION_S = 6.0          # pump_cycle: inflate 2 s, hold 0.2 s, jet 1.8 s -> 1.5 cycles
+DURATION_S = 6.0  # pump_cycle: inflate 2 s, hold 0.2 s, jet 1.8 s -> 1.5 cycles
 REAL_TIME_FACTOR = 3.0
 
 
@@ -31,7 +35,7 @@ def ros_domain(monkeypatch):
 
 
 def read_bag(path: Path) -> dict[str, list[tuple[float, object]]]:
-    """topic -> [(header/clock stamp in s or None, message)] read with rosbags."""
+    """Read a recording with rosbags: topic -> [(header/clock stamp in s or None, message)]."""
     out: dict[str, list] = {}
     with AnyReader([path]) as reader:
         for conn, _, raw in reader.messages(connections=reader.connections):
@@ -58,16 +62,29 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
     mcap = tmp_path / 'run.mcap'
     t_start = time.monotonic()
     # start paused: the recorder subscribes, then the run starts from t=0 with everything matched
-    with SimHarness(scene='pump_cycle', controller=True, log_dir=tmp_path,
-                    parameters={'duration_s': DURATION_S, 'real_time_factor': REAL_TIME_FACTOR,
-                                'start_paused': True}) as h:
+    with SimHarness(
+        scene='pump_cycle',
+        controller=True,
+        log_dir=tmp_path,
+        parameters={
+            'duration_s': DURATION_S,
+            'real_time_factor': REAL_TIME_FACTOR,
+            'start_paused': True,
+        },
+    ) as h:
         recorder = Recorder(h.node, mcap, None)
         try:
-            # every topic but the mantle profile (a shell-model topic; pump_cycle is lumped) and the
-            # atomic command (sent by closed-loop controllers only)
-            h.spin_until(lambda: all(sub.get_publisher_count() > 0 for sub in recorder._subscriptions
-                                     if not sub.topic_name.endswith(('mantle_profile', 'cmd/command'))), 30.0,
-                         'the recorder to match every topic')
+            # every topic but the mantle profile (a shell-model topic; pump_cycle is lumped) and
+            # the atomic command (sent by closed-loop controllers only)
+            h.spin_until(
+                lambda: all(
+                    sub.get_publisher_count() > 0
+                    for sub in recorder._subscriptions
+                    if not sub.topic_name.endswith(('mantle_profile', 'cmd/command'))
+                ),
+                30.0,
+                'the recorder to match every topic',
+            )
             assert h.resume().success
             assert h.wait_for_exit('sim_node', timeout_s=100) == 0, h.output()[-3000:]
             h.spin(0.5)
@@ -83,14 +100,30 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
     print(f'wall time {wall:.1f} s for {DURATION_S} s simulated at rtf {REAL_TIME_FACTOR}')
 
     bag = read_bag(mcap)
-    for topic in ('/clock', '/pulsejet/volume', '/pulsejet/velocity', '/pulsejet/thrust', '/pulsejet/mantle_radius',
-                  '/pulsejet/fluid_mass', '/pulsejet/energy_ledger', '/pulsejet/cmd/pump_flow',
-                  '/pulsejet/cmd/valve', '/pulsejet/cmd/cable_force', '/pulsejet/applied_command'):
+    for topic in (
+        '/clock',
+        '/pulsejet/volume',
+        '/pulsejet/velocity',
+        '/pulsejet/thrust',
+        '/pulsejet/mantle_radius',
+        '/pulsejet/fluid_mass',
+        '/pulsejet/energy_ledger',
+        '/pulsejet/cmd/pump_flow',
+        '/pulsejet/cmd/valve',
+        '/pulsejet/cmd/cable_force',
+        '/pulsejet/applied_command',
+    ):
         assert bag.get(topic), f'{topic} not recorded; have {sorted(bag)}'
 
     # nothing is NaN
-    for topic in ('/pulsejet/volume', '/pulsejet/mantle_radius', '/pulsejet/fluid_mass', '/pulsejet/cmd/pump_flow',
-                  '/pulsejet/cmd/valve', '/pulsejet/cmd/cable_force'):
+    for topic in (
+        '/pulsejet/volume',
+        '/pulsejet/mantle_radius',
+        '/pulsejet/fluid_mass',
+        '/pulsejet/cmd/pump_flow',
+        '/pulsejet/cmd/valve',
+        '/pulsejet/cmd/cable_force',
+    ):
         assert all(math.isfinite(v) for v in values_of(bag[topic])), topic
     velocity = np.array([(t, m.twist.linear.x) for t, m in bag['/pulsejet/velocity']])
     thrust = np.array([(t, m.wrench.force.x) for t, m in bag['/pulsejet/thrust']])
@@ -112,21 +145,24 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
     assert max(valve) > 0.5 and min(valve) == 0.0
 
     # the volume rose and fell at least once
-    vol = np.array(values_of(bag['/pulsejet/volume']), dtype=float)   # in publication order
+    vol = np.array(values_of(bag['/pulsejet/volume']), dtype=float)  # in publication order
     v0, v_max = vol[0], vol.max()
     assert v_max > 1.5 * v0, f'volume did not rise: start {v0:.3e}, max {v_max:.3e} m^3'
     high, low = v0 + 0.75 * (v_max - v0), v0 + 0.25 * (v_max - v0)
     i_high = int(np.argmax(vol > high))
-    assert vol[i_high:].min() < low, \
-        f'volume did not fall after rising: max {v_max:.3e}, min after {vol[i_high:].min():.3e} m^3'
+    assert (
+        vol[i_high:].min() < low
+    ), f'volume did not fall after rising: max {v_max:.3e}, min after {vol[i_high:].min():.3e} m^3'
 
-    # the applied commands replay the run offline step for step (same kernels, same batches' commands)
+    # the applied commands replay the run offline step for step (same kernels, same batches'
+    # commands)
     applied = bag.get('/pulsejet/applied_command')
     assert applied, 'no /pulsejet/applied_command recorded'
     from pulsejet_sim.messages import command_from_applied
     from pulsejet_sim.scene import load_scene
     from pulsejet_sim.simulation import Simulation
-    changes = sorted((command_from_applied(m) for _, m in applied), key=lambda tc: tc[0])   # stable
+
+    changes = sorted((command_from_applied(m) for _, m in applied), key=lambda tc: tc[0])  # stable
     replay = Simulation(load_scene('pump_cycle').model)
     dt = replay.model.dt_s
     for i, (t_i, cmd) in enumerate(changes):
@@ -155,9 +191,25 @@ def test_demo_end_to_end(ros_domain, tmp_path):
     out = tmp_path / 'demo.mcap'
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(1 + (os.getpid() + DOMAIN_OFFSET + 1) % 100)
-    proc = subprocess.Popen([sys.executable, '-m', 'pulsejet_sim.demo', '--duration', '3', '--real-time-factor', '3',
-                             '--out', str(out)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, cwd=tmp_path, start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            '-m',
+            'pulsejet_sim.demo',
+            '--duration',
+            '3',
+            '--real-time-factor',
+            '3',
+            '--out',
+            str(out),
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        cwd=tmp_path,
+        start_new_session=True,
+    )
     try:
         text, _ = proc.communicate(timeout=120)
     finally:
@@ -174,15 +226,36 @@ def test_demo_end_to_end(ros_domain, tmp_path):
     assert png.is_file(), text[-2000:]
     assert f'recording: {out}' in text and f'plot:      {png}' in text, text[-2000:]
     assert 'distance' in text, text[-2000:]
-    assert "scene 'shell_robot'" in text and '/pulsejet/mantle_profile' in text, text[-2000:]   # the default scene
+    assert "scene 'shell_robot'" in text and '/pulsejet/mantle_profile' in text, text[
+        -2000:
+    ]  # the default scene
 
 
 @pytest.mark.timeout(60)
 def test_demo_reports_a_failing_child(ros_domain, tmp_path):
-    """A sim_node that cannot start (unknown scene) makes the demo exit non-zero with the reason."""
+    """
+    A sim_node that cannot start (unknown scene) makes the demo exit non-zero.
+
+    The demo reports the reason.
+    """
     out = tmp_path / 'bad.mcap'
-    proc = subprocess.run([sys.executable, '-m', 'pulsejet_sim.demo', '--duration', '1', '--scene', 'no_such_scene',
-                           '--out', str(out)], env=dict(os.environ), capture_output=True, text=True, cwd=tmp_path,
-                          timeout=50)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            '-m',
+            'pulsejet_sim.demo',
+            '--duration',
+            '1',
+            '--scene',
+            'no_such_scene',
+            '--out',
+            str(out),
+        ],
+        env=dict(os.environ),
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=50,
+    )
     assert proc.returncode != 0
     assert 'demo failed' in proc.stderr and 'no_such_scene' in proc.stderr, proc.stderr[-3000:]

@@ -1,17 +1,21 @@
-"""The launch file (launch/pulsejet.launch.py), checked without `launch` (not installable here):
+"""
+The launch file (launch/pulsejet.launch.py), checked without `launch`.
+
+The launch file (launch/pulsejet.launch.py), checked without `launch` (not installable here):
 every executable it starts exists, every parameter in its params file is declared by that node, the
-files it names are installed by setup.py, and sim_node accepts the params file for real."""
+files it names are installed by setup.py, and sim_node accepts the params file for real.
+"""
+
 import ast
+from pathlib import Path
 import subprocess
 import sys
-from pathlib import Path
-
-import pytest
-import yaml
 
 from conftest import isolate_ros
 from pulsejet_ctrl import controller_node
 from pulsejet_sim import sim_node
+import pytest
+import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 LAUNCH = ROOT / 'launch' / 'pulsejet.launch.py'
@@ -23,7 +27,13 @@ def launched_nodes():
     nodes = []
     for call in ast.walk(tree):
         if isinstance(call, ast.Call) and getattr(call.func, 'id', None) == 'Node':
-            nodes.append({kw.arg: kw.value.value for kw in call.keywords if isinstance(kw.value, ast.Constant)})
+            nodes.append(
+                {
+                    kw.arg: kw.value.value
+                    for kw in call.keywords
+                    if isinstance(kw.value, ast.Constant)
+                }
+            )
     return nodes
 
 
@@ -40,7 +50,9 @@ def test_launch_starts_installed_executables_with_declared_parameters():
     scripts = dict(console_scripts())
     declared = {
         'sim_node': set(sim_node.PARAMETER_SPECS),
-        'controller_node': {'scene', 'rate_hz', 'closed_loop'} | set(controller_node.ROUTINE_FIELDS),
+        'controller_node': (
+            {'scene', 'rate_hz', 'closed_loop'} | set(controller_node.ROUTINE_FIELDS)
+        ),
         'recorder': {'output', 'topics'},
     }
     params = yaml.safe_load(PARAMS.read_text())
@@ -51,7 +63,7 @@ def test_launch_starts_installed_executables_with_declared_parameters():
         block = params[node['name']]['ros__parameters']
         assert set(block) <= declared[node['name']], set(block) - declared[node['name']]
     for name, value in params['sim_node']['ros__parameters'].items():
-        sim_node.PARAMETER_SPECS[name].check(value)           # in range, the right type
+        sim_node.PARAMETER_SPECS[name].check(value)  # in range, the right type
     setup = (ROOT / 'setup.py').read_text()
     assert "glob('launch/*.launch.py')" in setup and "glob('config/params/*.yaml')" in setup
     assert "'config', 'params', 'pulsejet.yaml'" in LAUNCH.read_text()
@@ -60,8 +72,23 @@ def test_launch_starts_installed_executables_with_declared_parameters():
 @pytest.mark.timeout(120)
 def test_sim_node_runs_from_the_params_file(monkeypatch):
     isolate_ros(monkeypatch, 63)
-    proc = subprocess.run([sys.executable, '-m', 'pulsejet_sim.sim_node', '--ros-args', '--params-file', str(PARAMS),
-                           '-p', 'scene:=pump_cycle', '-p', 'duration_s:=0.05'],
-                          capture_output=True, text=True, timeout=100, cwd=ROOT)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            '-m',
+            'pulsejet_sim.sim_node',
+            '--ros-args',
+            '--params-file',
+            str(PARAMS),
+            '-p',
+            'scene:=pump_cycle',
+            '-p',
+            'duration_s:=0.05',
+        ],
+        capture_output=True,
+        text=True,
+        timeout=100,
+        cwd=ROOT,
+    )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert 'watchdog 0.5 s of sim time (safe)' in proc.stdout + proc.stderr

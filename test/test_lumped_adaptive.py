@@ -1,12 +1,16 @@
-"""The lumped model's adaptive integrator (Dormand-Prince 5(4), dense output) beside the fixed RK4."""
-import numpy as np
-import pytest
+"""
+The lumped model's adaptive integrator beside the fixed RK4.
 
+The adaptive integrator: Dormand-Prince 5(4), dense output.
+"""
+
+import numpy as np
 from pulsejet_sim.models import lumped_kernels as K
 from pulsejet_sim.models.base import Command
 from pulsejet_sim.runner import run_scene
-from pulsejet_sim.scene import SceneError, load_scene
+from pulsejet_sim.scene import load_scene, SceneError
 from pulsejet_sim.simulation import Simulation
+import pytest
 
 ADAPTIVE = {'simulation': {'integrator': 'adaptive', 'rtol': 1e-8, 'atol': 1e-11}}
 
@@ -20,15 +24,19 @@ def test_escape_adaptive_matches_rk4_with_few_steps():
     out, stats = model.advance_dense(y, 0.0, 3.0, Command(0.0, 1.0), t_out)
     assert out.shape == (300, K.NY)
     assert abs(y[K.Y_X] - rk4.state[K.Y_X]) < 1e-7 * abs(rk4.state[K.Y_X])
-    assert stats[K.S_ACCEPTED] < 1000          # against 30000 RK4 steps
-    assert np.array_equal(out[-1, :K.N_INTEGRATED], y[:K.N_INTEGRATED])   # dense output exact at the end
+    assert stats[K.S_ACCEPTED] < 1000  # against 30000 RK4 steps
+    assert np.array_equal(
+        out[-1, : K.N_INTEGRATED], y[: K.N_INTEGRATED]
+    )  # dense output exact at the end
     # the dense output between steps agrees with integrating to that time
     y2 = model.initial_state()
     model.advance_dense(y2, 0.0, 1.234, Command(0.0, 1.0))
     j = 122
-    out2, _ = model.advance_dense(model.initial_state(), 0.0, 1.234, Command(0.0, 1.0), np.array([1.23]))
+    out2, _ = model.advance_dense(
+        model.initial_state(), 0.0, 1.234, Command(0.0, 1.0), np.array([1.23])
+    )
     assert abs(out2[0, K.Y_U] - out[j, K.Y_U]) < 1e-6 * abs(out[j, K.Y_U])
-    assert abs(y2[K.Y_X] - out[j, K.Y_X]) < 2e-3   # 4 ms later
+    assert abs(y2[K.Y_X] - out[j, K.Y_X]) < 2e-3  # 4 ms later
 
 
 def test_pump_cycle_adaptive_closes_ledger_and_tracks_rk4():
@@ -39,14 +47,16 @@ def test_pump_cycle_adaptive_closes_ledger_and_tracks_rk4():
     assert adaptive.sim.state.shape[0] == K.NY + K.NMEM and rk4.sim.state.shape[0] == K.NY
     led = adaptive.sim.energy_ledger()
     assert abs(led['closure_relative']) < 1e-6
-    assert led['out_valve'] > 0.0               # the valve sealed a moving flow at 4.1 s
+    assert led['out_valve'] > 0.0  # the valve sealed a moving flow at 4.1 s
     x_a, x_r = adaptive.sim.state[K.Y_X], rk4.sim.state[K.Y_X]
-    assert abs(x_a - x_r) < 2e-4 * abs(x_r)     # RK4's valve moves in dt steps, DP5's continuously
+    assert abs(x_a - x_r) < 2e-4 * abs(x_r)  # RK4's valve moves in dt steps, DP5's continuously
 
 
 def test_integrator_options_refused_cleanly():
-    with pytest.raises(SceneError, match=r"simulation.integrator: 'euler' is not allowed; allowed: one of rk4, "
-                                         r"adaptive"):
+    with pytest.raises(
+        SceneError,
+        match=r"simulation.integrator: 'euler' is not allowed; allowed: one of rk4, " r'adaptive',
+    ):
         load_scene('escape', {'simulation': {'integrator': 'euler'}})
     with pytest.raises(SceneError, match='simulation.rtol'):
         load_scene('escape', {'simulation': {'integrator': 'adaptive', 'rtol': 0.5}})

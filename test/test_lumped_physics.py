@@ -1,17 +1,17 @@
 """Physics of the lumped model (paper 001): each test states the figure it checks and prints it."""
+
 import importlib.util
 import math
 from pathlib import Path
 
 import numpy as np
-import pytest
-
 from pulsejet_sim.models import lumped_kernels as K
 from pulsejet_sim.models.base import Command
 from pulsejet_sim.models.lumped import TERM_BITS
 from pulsejet_sim.models.lumped_figures import section41_figures
-from pulsejet_sim.scene import SceneError, load_scene
+from pulsejet_sim.scene import load_scene, SceneError
 from pulsejet_sim.simulation import Simulation
+import pytest
 
 B0 = 0.036
 
@@ -30,16 +30,24 @@ def series(rows, name):
 
 
 def test_small_oscillation_period_matches_effective_mass_and_stiffness():
-    sim, rows = run(overrides={'geometry': {'initial_minor_semi_axis_m': B0 * 1.001}}, duration_s=8.0, batch=10)
+    sim, rows = run(
+        overrides={'geometry': {'initial_minor_semi_axis_m': B0 * 1.001}}, duration_s=8.0, batch=10
+    )
     d = sim.model.diagnostics(sim.model.initial_state(), sim.command)
-    m_eff = d[K.D_B_MASS]                      # I_b + m_b + m_l at b0, kg
-    k_total = sim.model.params[K.P_K]          # the consistent coupling applies no k_x (a diagnostic)
+    m_eff = d[K.D_B_MASS]  # I_b + m_b + m_l at b0, kg
+    k_total = sim.model.params[K.P_K]  # the consistent coupling applies no k_x (a diagnostic)
     expected = 2 * math.pi * math.sqrt(m_eff / k_total)
     t, b = series(rows, 'time_s'), series(rows, 'mantle_radius_m') - B0
-    down = [t[i] - b[i] * (t[i + 1] - t[i]) / (b[i + 1] - b[i]) for i in range(len(b) - 1) if b[i] > 0 >= b[i + 1]]
+    down = [
+        t[i] - b[i] * (t[i + 1] - t[i]) / (b[i + 1] - b[i])
+        for i in range(len(b) - 1)
+        if b[i] > 0 >= b[i + 1]
+    ]
     measured = float(np.mean(np.diff(down)))
-    print(f'small-oscillation period: measured {measured:.5f} s, 2 pi sqrt(m_eff/k) = {expected:.5f} s '
-          f'(m_eff = {m_eff:.2f} kg)')
+    print(
+        f'small-oscillation period: measured {measured:.5f} s, 2 pi sqrt(m_eff/k) = {expected:.5f}'
+        f' s (m_eff = {m_eff:.2f} kg)'
+    )
     assert len(down) >= 4
     assert measured == pytest.approx(expected, rel=2e-3)
 
@@ -58,6 +66,7 @@ def test_energy_ledger_closes_in_the_consistent_model():
 def test_energy_ledger_closes_with_pump_and_valve_events():
     sim, _ = run('pump_cycle', duration_s=12.0)
     from pulsejet_ctrl.routines import PumpValveRoutine
+
     # drive it with the routine as the runner does
     sc = load_scene('pump_cycle')
     sim = Simulation(sc.model)
@@ -72,27 +81,45 @@ def test_energy_ledger_closes_with_pump_and_valve_events():
 
 
 def test_paper_coupling_books_the_energy_its_equations_create():
-    """PHYSICS.md 'Energy': integrated as written, eqs. 1 and 3 let the jet take more than the spring
-    stored. The ledger says which terms create it, and never books it as an input."""
+    """
+    The ledger books the energy the paper coupling creates as created, never as input.
+
+    PHYSICS.md 'Energy': integrated as written, eqs. 1 and 3 let the jet take more than the spring
+    stored. The ledger says which terms create it, and never books it as an input.
+    """
     sim, _ = run(overrides={'options': {'coupling': 'paper'}}, duration_s=2.5)
     ledger = sim.energy_ledger()
     created = {k: v for k, v in ledger.items() if k.startswith('created_')}
-    print(f"paper coupling: {sum(created.values()):.3f} J created on {ledger['in_initial']:.3f} J stored; "
-          f"{ {k: round(v, 3) for k, v in created.items()} }; closure {ledger['closure_error']:.2e} J")
+    print(
+        f"paper coupling: {sum(created.values()):.3f} J created on {ledger['in_initial']:.3f} J"
+        f' stored; { {k: round(v, 3) for k, v in created.items()} }; closure'
+        f" {ledger['closure_error']:.2e} J"
+    )
     assert sum(created.values()) > 2 * ledger['in_initial']
-    assert created['created_unpaid_jet_kinetic'] > ledger['in_initial']     # no Bernoulli back pressure
-    assert created['created_fluid_stiffness'] > 0.0                          # k_x b has no reaction
-    assert created['created_unpaid_added_mass_thrust'] > 0.0                 # no R_x on the shell
-    assert created['created_nozzle_mass_variation'] < 0.0                    # destroyed while deflating
+    assert (
+        created['created_unpaid_jet_kinetic'] > ledger['in_initial']
+    )  # no Bernoulli back pressure
+    assert created['created_fluid_stiffness'] > 0.0  # k_x b has no reaction
+    assert created['created_unpaid_added_mass_thrust'] > 0.0  # no R_x on the shell
+    assert created['created_nozzle_mass_variation'] < 0.0  # destroyed while deflating
     assert [k for k in ledger if k.startswith('in_')] == ['in_initial', 'in_actuation_work']
     assert ledger['in_actuation_work'] == 0.0
     assert abs(ledger['closure_relative']) < 1e-9
 
 
 def ledger_closure_from_keys(ledger):
-    """closure as docs/ARCHITECTURE.md defines it from the keys (out_other aggregates valve and mixing)."""
+    """
+    Compute the closure as docs/ARCHITECTURE.md defines it from the keys.
+
+    out_other aggregates valve and mixing.
+    """
     stored = sum(v for k, v in ledger.items() if k.startswith('stored_'))
-    out = ledger['out_jet_kinetic'] + ledger['out_drag'] + ledger['out_viscous'] + ledger['out_other']
+    out = (
+        ledger['out_jet_kinetic']
+        + ledger['out_drag']
+        + ledger['out_viscous']
+        + ledger['out_other']
+    )
     created = sum(v for k, v in ledger.items() if k.startswith('created_'))
     return stored - ledger['in_initial'] - ledger['in_actuation_work'] + out - created
 
@@ -100,16 +127,19 @@ def ledger_closure_from_keys(ledger):
 @pytest.mark.parametrize('coupling', ['consistent', 'paper'])
 def test_ledger_keys_add_up_to_the_closure(coupling):
     from pulsejet_ctrl.routines import PumpValveRoutine
+
     sc = load_scene('pump_cycle', {'options': {'coupling': coupling}})
     sim = Simulation(sc.model)
     routine = PumpValveRoutine.from_config(sc.routine)
     while sim.time_s < 4.0:
         sim.step(100, routine.command(sim.time_s, sim.observe().volume_m3))
     ledger = sim.energy_ledger()
-    assert ledger['out_other'] == pytest.approx(ledger['out_valve'] + ledger['out_inflow_mixing'], rel=1e-12)
+    assert ledger['out_other'] == pytest.approx(
+        ledger['out_valve'] + ledger['out_inflow_mixing'], rel=1e-12
+    )
     assert ledger['closure_error'] == pytest.approx(ledger_closure_from_keys(ledger), abs=1e-12)
     assert [k for k in ledger if k.startswith('in_')] == ['in_initial', 'in_actuation_work']
-    assert ledger['in_actuation_work'] > 0.5       # the pump inflated the shell
+    assert ledger['in_actuation_work'] > 0.5  # the pump inflated the shell
     assert abs(ledger['closure_relative']) < 1e-5
     if coupling == 'paper':
         # the pump ran: the water it drew in at rest gets the vehicle's momentum for free in eq. 1
@@ -117,8 +147,12 @@ def test_ledger_keys_add_up_to_the_closure(coupling):
 
 
 def test_created_terms_are_the_power_integrals_of_their_terms():
-    """created_unpaid_jet_kinetic = int 1/2 rho A_n |u_n|^3 dt (the Bernoulli power the paper's shell
-    does not supply) and created_fluid_stiffness = int -k_x b b' dt, measured outside the kernel."""
+    """
+    The created terms are the power integrals of their terms, measured outside the kernel.
+
+    created_unpaid_jet_kinetic = int 1/2 rho A_n |u_n|^3 dt (the Bernoulli power the paper's shell
+    does not supply) and created_fluid_stiffness = int -k_x b b' dt, measured outside the kernel.
+    """
     sc = load_scene('escape', {'options': {'coupling': 'paper'}})
     model, dt = sc.model, sc.model.dt_s
     p = model.params
@@ -136,8 +170,11 @@ def test_created_terms_are_the_power_integrals_of_their_terms():
     kx.append(-d[K.D_K_X] * y[K.Y_B] * y[K.Y_W])
     ledger = model.energy_ledger(y)
     jet_w, kx_w = np.trapezoid(jet, dx=dt), np.trapezoid(kx, dx=dt)
-    print(f"over 1 s: created_unpaid_jet_kinetic {ledger['created_unpaid_jet_kinetic']:.6f} J vs {jet_w:.6f} J; "
-          f"created_fluid_stiffness {ledger['created_fluid_stiffness']:.6f} J vs {kx_w:.6f} J")
+    print(
+        f"over 1 s: created_unpaid_jet_kinetic {ledger['created_unpaid_jet_kinetic']:.6f} J vs"
+        f" {jet_w:.6f} J; created_fluid_stiffness {ledger['created_fluid_stiffness']:.6f} J vs"
+        f' {kx_w:.6f} J'
+    )
     assert ledger['created_unpaid_jet_kinetic'] == pytest.approx(jet_w, rel=1e-6)
     assert ledger['created_fluid_stiffness'] == pytest.approx(kx_w, rel=1e-6)
 
@@ -147,8 +184,11 @@ def test_closure_error_shrinks_at_the_integrator_order(coupling, duration_s):
     # paper: 2 s, before the fluid-stiffness runaway collapses the shell (at 2.96 s)
     errors = []
     for dt in (0.02, 0.01, 0.005):
-        sim, _ = run(overrides={'simulation': {'dt_s': dt}, 'options': {'coupling': coupling}},
-                     duration_s=duration_s, batch=1)
+        sim, _ = run(
+            overrides={'simulation': {'dt_s': dt}, 'options': {'coupling': coupling}},
+            duration_s=duration_s,
+            batch=1,
+        )
         errors.append(abs(sim.energy_ledger()['closure_error']))
     ratios = [errors[i] / errors[i + 1] for i in range(2)]
     orders = [math.log2(r) for r in ratios]
@@ -156,32 +196,42 @@ def test_closure_error_shrinks_at_the_integrator_order(coupling, duration_s):
     assert all(o > 3.5 for o in orders), 'RK4: the closure error should fall ~16x per halving'
 
 
-# ---- paper 001, section 4.1: each figure the paper reports, as a check ---------------------------
+# ---- paper 001, section 4.1: each figure the paper reports, as a check --------------------------
 # Figures and definitions: pulsejet_sim/models/lumped_figures.py; table and discussion:
 # docs/PHYSICS_LUMPED.md; every reading of the lost text: benchmarks/results/paper001_section41.md.
 # A claim the model reproduces is asserted with a stated tolerance; a claim it does not reproduce
 # is asserted as what the model does, with the measured number in the message.
 
 BENCH = Path(__file__).resolve().parent.parent / 'benchmarks' / 'paper001_section41.py'
-STORED = Path(__file__).resolve().parent.parent / 'benchmarks' / 'results' / 'paper001_section41.md'
+STORED = (
+    Path(__file__).resolve().parent.parent / 'benchmarks' / 'results' / 'paper001_section41.md'
+)
 
 
 @pytest.fixture(scope='module')
 def section41():
-    return {coupling: section41_figures(load_scene('escape', {'options': {'coupling': coupling}}).model,
-                                        duration_s=20.0)
-            for coupling in ('paper', 'consistent')}
+    return {
+        coupling: section41_figures(
+            load_scene('escape', {'options': {'coupling': coupling}}).model, duration_s=20.0
+        )
+        for coupling in ('paper', 'consistent')
+    }
 
 
 def test_section_4_1_fluid_mass_settles_near_1_kg(section41):
     paper, cons = section41['paper'], section41['consistent']
-    print(f'paper coupling: stops at {paper.blow_up_s} s ({paper.blow_up_cause}), fluid mass down to '
-          f'{paper.fluid_mass_min_kg:.4f} kg; consistent: settles at {cons.fluid_mass_settled_kg:.3f} kg '
-          f'(spread {cons.fluid_mass_spread_kg:.3f} kg over the last 3 s); paper: ~1.0 kg')
-    # paper coupling: NOT reproduced. The unreacted k_x b (k_x ~ U^2) squeezes the shell ever harder
-    # as the vehicle speeds up: the shell collapses through b0 to b < 0.02 b0 at 2.96 s.
+    print(
+        f'paper coupling: stops at {paper.blow_up_s} s ({paper.blow_up_cause}), fluid mass down to'
+        f' {paper.fluid_mass_min_kg:.4f} kg; consistent: settles at'
+        f' {cons.fluid_mass_settled_kg:.3f} kg (spread {cons.fluid_mass_spread_kg:.3f} kg over the'
+        ' last 3 s); paper: ~1.0 kg'
+    )
+    # paper coupling: NOT reproduced. The unreacted k_x b (k_x ~ U^2) squeezes the shell ever
+    # harder as the vehicle speeds up: the shell collapses through b0 to b < 0.02 b0 at 2.96 s.
     assert paper.blow_up_s is not None and paper.blow_up_s < 3.5, paper.blow_up_s
-    assert paper.fluid_mass_min_kg < 0.01, f'paper coupling empties the shell ({paper.fluid_mass_min_kg} kg)'
+    assert (
+        paper.fluid_mass_min_kg < 0.01
+    ), f'paper coupling empties the shell ({paper.fluid_mass_min_kg} kg)'
     # consistent coupling: reproduced, 1.0 +- 0.15 kg, settled
     assert 0.85 < cons.fluid_mass_settled_kg < 1.15
     assert cons.fluid_mass_spread_kg < 0.2
@@ -189,35 +239,52 @@ def test_section_4_1_fluid_mass_settles_near_1_kg(section41):
 
 def test_section_4_1_added_mass_share(section41):
     for coupling, f in section41.items():
-        print(f'{coupling}: added-mass-variation share {f.share_impulse:.3f} of the impulse, peak ratio '
-              f'{f.share_peak:.3f}, over the first deflation (to {f.window_end_s:.3f} s); paper: up to ~0.75')
+        print(
+            f'{coupling}: added-mass-variation share {f.share_impulse:.3f} of the impulse, peak'
+            f' ratio {f.share_peak:.3f}, over the first deflation (to {f.window_end_s:.3f} s);'
+            ' paper: up to ~0.75'
+        )
     # NOT reproduced in either coupling: F_amv / T = kappa U / u_j with kappa <= 0.58 here, so 75 %
     # would need a vehicle several times faster than its own jet (docs/PHYSICS_LUMPED.md).
     paper, cons = section41['paper'], section41['consistent']
-    assert paper.share_impulse < 0.5, f'paper coupling: share {paper.share_impulse:.3f}, paper claims ~0.75'
-    assert cons.share_impulse < 0.5, f'consistent coupling: share {cons.share_impulse:.3f}, paper claims ~0.75'
-    assert 0.05 < paper.share_impulse and 0.05 < cons.share_impulse     # but not absent
+    assert (
+        paper.share_impulse < 0.5
+    ), f'paper coupling: share {paper.share_impulse:.3f}, paper claims ~0.75'
+    assert (
+        cons.share_impulse < 0.5
+    ), f'consistent coupling: share {cons.share_impulse:.3f}, paper claims ~0.75'
+    assert 0.05 < paper.share_impulse and 0.05 < cons.share_impulse  # but not absent
 
 
 def test_section_4_1_fluid_stiffness_ratio(section41):
     paper, cons = section41['paper'], section41['consistent']
-    print(f'k_x/k max: paper coupling {paper.kx_over_k_max:.2f} (peak speed {paper.peak_speed_m_s:.1f} m/s), '
-          f'consistent {cons.kx_over_k_max:.3f} (peak speed {cons.peak_speed_m_s:.2f} m/s); paper: ~0.01')
+    print(
+        f'k_x/k max: paper coupling {paper.kx_over_k_max:.2f} (peak speed'
+        f' {paper.peak_speed_m_s:.1f} m/s), consistent {cons.kx_over_k_max:.3f} (peak speed'
+        f' {cons.peak_speed_m_s:.2f} m/s); paper: ~0.01'
+    )
     # NOT reproduced: k_x of section 3.5 grows with U^2; applied (paper coupling) it runs away,
     # reported (consistent) it reaches half of k at the escape's peak speed.
     assert paper.kx_over_k_max > 1.0, f'paper coupling: k_x/k reaches {paper.kx_over_k_max:.2f}'
     assert cons.kx_over_k_max > 0.05, f'consistent: k_x/k reaches {cons.kx_over_k_max:.3f}'
     # it does hold for a slow vehicle: below 0.2 m/s k_x/k < 5 % (consistent run, sampled)
     sim, rows = run(duration_s=15.0, batch=50)
-    ratio = [sim.model.fluid_stiffness_ratio(np.array([0, o.velocity_m_s, o.mantle_radius_m] + [0] * (K.NY - 3)))
-             for o in rows if o.velocity_m_s < 0.2]
+    ratio = [
+        sim.model.fluid_stiffness_ratio(
+            np.array([0, o.velocity_m_s, o.mantle_radius_m] + [0] * (K.NY - 3))
+        )
+        for o in rows
+        if o.velocity_m_s < 0.2
+    ]
     assert max(ratio) < 0.05
 
 
 def test_section_4_1_deflation_time(section41):
     paper, cons = section41['paper'], section41['consistent']
-    print(f'90 % of the water out: paper coupling {paper.deflation_90_s:.3f} s, consistent '
-          f'{cons.deflation_90_s:.3f} s; paper: about 1 s (Fig. 7)')
+    print(
+        f'90 % of the water out: paper coupling {paper.deflation_90_s:.3f} s, consistent '
+        f'{cons.deflation_90_s:.3f} s; paper: about 1 s (Fig. 7)'
+    )
     # NOT reproduced: 13 l through a 2.2 cm nozzle in 1 s need a ~9 m/s jet carrying ~490 J, the
     # spring stores 10.6 J; even the paper coupling, which creates energy, takes 2.8 s.
     assert paper.deflation_90_s > 1.5, f'paper coupling: 90 % out at {paper.deflation_90_s:.3f} s'
@@ -226,19 +293,27 @@ def test_section_4_1_deflation_time(section41):
 
 def test_section_4_1_peak_speed_is_reported(section41):
     paper, cons = section41['paper'], section41['consistent']
-    print(f'peak speed: paper coupling {paper.peak_speed_m_s:.2f} m/s (at the collapse), '
-          f'consistent {cons.peak_speed_m_s:.3f} m/s; the paper\'s text gives no number')
-    assert cons.peak_speed_m_s > 0.5               # the escape is fast: the shell's energy moved the body
-    assert paper.peak_speed_m_s > 10.0             # the created energy shows in the speed
+    print(
+        f'peak speed: paper coupling {paper.peak_speed_m_s:.2f} m/s (at the collapse), '
+        f"consistent {cons.peak_speed_m_s:.3f} m/s; the paper's text gives no number"
+    )
+    assert cons.peak_speed_m_s > 0.5  # the escape is fast: the shell's energy moved the body
+    assert paper.peak_speed_m_s > 10.0  # the created energy shows in the speed
 
 
 def _stored_rows():
     text = STORED.read_text()
-    return [line for line in text.splitlines() if line.startswith('| ') and '`' in line.split('|')[2]]
+    return [
+        line for line in text.splitlines() if line.startswith('| ') and '`' in line.split('|')[2]
+    ]
 
 
 def test_stored_table_row_matches_a_rerun(section41):
-    """The primary case of benchmarks/results/paper001_section41.md, rerun now, gives the stored row."""
+    """
+    The primary case of the stored table, rerun now, gives the stored row.
+
+    The table: benchmarks/results/paper001_section41.md.
+    """
     spec = importlib.util.spec_from_file_location('paper001_section41', BENCH)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
@@ -264,8 +339,14 @@ def test_stored_figures_are_converged():
 @pytest.mark.parametrize('term', sorted(TERM_BITS))
 def test_each_switch_removes_its_term(term):
     on, rows_on = run(duration_s=0.5)
-    off, rows_off = run(overrides={'terms': {term: False}} if term not in ('shell_inertia',) else
-                        {'terms': {term: False}}, duration_s=0.5)
+    off, rows_off = run(
+        overrides=(
+            {'terms': {term: False}}
+            if term not in ('shell_inertia',)
+            else {'terms': {term: False}}
+        ),
+        duration_s=0.5,
+    )
     assert off.model.flags & TERM_BITS[term] == 0 and on.model.flags & TERM_BITS[term]
     d_on = on.model.diagnostics(on.model.initial_state(), on.command)
     d_off = off.model.diagnostics(off.model.initial_state(), off.command)
@@ -273,18 +354,34 @@ def test_each_switch_removes_its_term(term):
     p = on.model.params
     effect = {
         'shell_inertia': lambda: d_on[K.D_B_MASS] - d_off[K.D_B_MASS] == pytest.approx(p[K.P_I_B]),
-        'internal_added_mass': lambda: d_on[K.D_B_MASS] - d_off[K.D_B_MASS] == pytest.approx(p[K.P_M_B]),
+        'internal_added_mass': (
+            lambda: d_on[K.D_B_MASS] - d_off[K.D_B_MASS] == pytest.approx(p[K.P_M_B])
+        ),
         'nozzle_inertia': lambda: d_off[K.D_M_L] == 0 and d_on[K.D_M_L] > 0,
         'viscous_loss': lambda: l_off['out_viscous'] == 0 and l_on['out_viscous'] > 0,
-        # consistent: the switch governs the outer flow's pull R_x; off, its work is booked as created
-        'fluid_stiffness': lambda: l_on['created_unpaid_added_mass_thrust'] == 0
-        and l_off['created_unpaid_added_mass_thrust'] != 0 and abs(l_off['closure_relative']) < 1e-6,
-        'added_mass': lambda: d_on[K.D_VEHICLE_MASS] - d_off[K.D_VEHICLE_MASS] == pytest.approx(d_on[K.D_M_X]),
-        'added_mass_variation': lambda: all(o.added_mass_force_n == 0 for o in rows_off)
-        and any(o.added_mass_force_n > 0 for o in rows_on),
-        'fluid_mass': lambda: d_on[K.D_VEHICLE_MASS] - d_off[K.D_VEHICLE_MASS] == pytest.approx(1000 * rows_on[0].volume_m3, rel=1e-2),
+        # consistent: the switch governs the outer flow's pull R_x; off, its work is booked as
+        # created
+        'fluid_stiffness': (
+            lambda: l_on['created_unpaid_added_mass_thrust'] == 0
+            and l_off['created_unpaid_added_mass_thrust'] != 0
+            and abs(l_off['closure_relative']) < 1e-6
+        ),
+        'added_mass': (
+            lambda: d_on[K.D_VEHICLE_MASS] - d_off[K.D_VEHICLE_MASS]
+            == pytest.approx(d_on[K.D_M_X])
+        ),
+        'added_mass_variation': (
+            lambda: all(o.added_mass_force_n == 0 for o in rows_off)
+            and any(o.added_mass_force_n > 0 for o in rows_on)
+        ),
+        'fluid_mass': (
+            lambda: d_on[K.D_VEHICLE_MASS] - d_off[K.D_VEHICLE_MASS]
+            == pytest.approx(1000 * rows_on[0].volume_m3, rel=1e-2)
+        ),
         'drag': lambda: l_off['out_drag'] == 0 and l_on['out_drag'] > 0,
-        'jet_thrust': lambda: all(o.thrust_n == 0 for o in rows_off) and any(o.thrust_n > 0 for o in rows_on),
+        'jet_thrust': (
+            lambda: all(o.thrust_n == 0 for o in rows_off) and any(o.thrust_n > 0 for o in rows_on)
+        ),
     }[term]
     assert effect()
     assert rows_on[-1].velocity_m_s != rows_off[-1].velocity_m_s or term in ('shell_inertia',)
@@ -292,7 +389,10 @@ def test_each_switch_removes_its_term(term):
 
 def test_paper_fluid_stiffness_switch_removes_the_k_x_b_term():
     on, _ = run(overrides={'options': {'coupling': 'paper'}}, duration_s=1.0)
-    off, _ = run(overrides={'options': {'coupling': 'paper'}, 'terms': {'fluid_stiffness': False}}, duration_s=1.0)
+    off, _ = run(
+        overrides={'options': {'coupling': 'paper'}, 'terms': {'fluid_stiffness': False}},
+        duration_s=1.0,
+    )
     l_on, l_off = on.energy_ledger(), off.energy_ledger()
     assert l_on['created_fluid_stiffness'] > 0 and l_off['created_fluid_stiffness'] == 0
     assert on.state[K.Y_B] != off.state[K.Y_B]
@@ -302,14 +402,24 @@ def test_coupling_option_and_its_deprecated_alias():
     default = load_scene('escape').model
     assert default.options['coupling'] == 'consistent' and default.flags & K.O_COUPLING_CONSISTENT
     # escape.yaml states coupling: consistent; the alias alone is read from options replaced whole
-    for overrides in ({'options': {'coupling': 'paper'}}, {'options': {'energy_model': 'paper'}},
-                      {'options': {'coupling': 'paper', 'energy_model': 'paper'}}):
+    for overrides in (
+        {'options': {'coupling': 'paper'}},
+        {'options': {'energy_model': 'paper'}},
+        {'options': {'coupling': 'paper', 'energy_model': 'paper'}},
+    ):
         sc = load_scene('escape', {**overrides}, replace=('options',))
         assert sc.model.options['coupling'] == 'paper', overrides
         assert not sc.model.flags & K.O_COUPLING_CONSISTENT
-    old = dict(load_scene('escape', {'options': {'energy_model': 'consistent'}}, replace=('options',)).model.options)
+    old = dict(
+        load_scene(
+            'escape', {'options': {'energy_model': 'consistent'}}, replace=('options',)
+        ).model.options
+    )
     assert old['coupling'] == 'consistent'
-    with pytest.raises(SceneError, match="options.energy_model: 'paper' contradicts options.coupling: 'consistent'"):
+    with pytest.raises(
+        SceneError,
+        match="options.energy_model: 'paper' contradicts options.coupling: 'consistent'",
+    ):
         load_scene('escape', {'options': {'energy_model': 'paper'}})
 
 
@@ -327,12 +437,20 @@ def test_switched_off_terms_are_compiled_out():
 def test_bad_scene_values_are_refused_with_key_value_and_allowed():
     cases = [
         ({'material': {'stiffness_n_m': -5}}, ['material.stiffness_n_m', '-5', 'allowed']),
-        ({'options': {'energy_model': 'magic'}}, ['options.energy_model', 'magic', 'consistent, paper']),
+        (
+            {'options': {'energy_model': 'magic'}},
+            ['options.energy_model', 'magic', 'consistent, paper'],
+        ),
         ({'options': {'coupling': 'magic'}}, ['options.coupling', 'magic', 'consistent, paper']),
-        ({'options': {'coupling': 'paper', 'energy_model': 'consistent'}},
-         ['options.energy_model', "'consistent'", "options.coupling: 'paper'", 'allowed']),
+        (
+            {'options': {'coupling': 'paper', 'energy_model': 'consistent'}},
+            ['options.energy_model', "'consistent'", "options.coupling: 'paper'", 'allowed'],
+        ),
         ({'terms': {'warp_drive': True}}, ['terms.warp_drive', 'unknown', 'drag']),
-        ({'geometry': {'initial_minor_semi_axis_m': 0.5}}, ['initial_minor_semi_axis_m', '0.5', 'below']),
+        (
+            {'geometry': {'initial_minor_semi_axis_m': 0.5}},
+            ['initial_minor_semi_axis_m', '0.5', 'below'],
+        ),
         ({'simulation': {'dt_s': 'fast'}}, ['simulation.dt_s', "'fast'", 'number']),
     ]
     for overrides, words in cases:
@@ -359,6 +477,7 @@ def test_blow_up_stops_at_the_last_good_state_and_says_why():
     sc = load_scene('escape', {'options': {'coupling': 'paper'}})
     sim = Simulation(sc.model)
     from pulsejet_sim.models.base import SimulationBlowUp
+
     with pytest.raises(SimulationBlowUp) as err:
         for _ in range(1000):
             sim.step(100)
@@ -373,18 +492,26 @@ def test_blow_up_stops_at_the_last_good_state_and_says_why():
 
 
 def test_no_pump_command_inflates_the_shell_past_its_bound():
-    """The pump's pressure-flow curve (relief at the shell's elastic pressure at b = 0.8 a, stall at
+    """
+    No pump command inflates the shell past its bound: the pump stalls first.
+
+    The pump's pressure-flow curve (relief at the shell's elastic pressure at b = 0.8 a, stall at
     0.9 a by default): the strongest command into a sealed, nearly slack shell stalls the pump
-    instead of blowing the shell up (it used to outgrow the ellipsoid within a second)."""
+    instead of blowing the shell up (it used to outgrow the ellipsoid within a second).
+    """
     sc = load_scene('pump_cycle', {'material': {'stiffness_n_m': 1e-3}})
     sim = Simulation(sc.model)
     a = sc.model.params[K.P_A]
     b_max = 0.0
     for _ in range(300):
         b_max = max(b_max, sim.step(100, Command(0.05, 0.0, 0.0)).mantle_radius_m)
-    assert 0.85 * a < b_max < 0.95 * a   # stall at 0.9 a, plus what the pump delivers while it spins down
-    assert sim.observe().pump_flow_m3_s < 0.05 * 0.05           # stalled
-    with pytest.raises(SceneError, match='pump_stall_pressure_pa: 1000000.0 Pa.*allowed: relief < stall'):
+    assert (
+        0.85 * a < b_max < 0.95 * a
+    )  # stall at 0.9 a, plus what the pump delivers while it spins down
+    assert sim.observe().pump_flow_m3_s < 0.05 * 0.05  # stalled
+    with pytest.raises(
+        SceneError, match='pump_stall_pressure_pa: 1000000.0 Pa.*allowed: relief < stall'
+    ):
         load_scene('pump_cycle', {'actuator': {'pump_stall_pressure_pa': 1e6}}).model
 
 
@@ -395,8 +522,13 @@ def test_same_scene_and_commands_are_bit_identical():
 
 
 def test_ledger_message_warns_when_the_equations_create_energy():
-    """The books of the paper coupling balance, but the published ledger status says energy is created."""
+    """
+    The paper coupling's books balance; the ledger status says energy is created.
+
+    The status is the published one.
+    """
     from pulsejet_sim import messages
+
     paper, _ = run(overrides={'options': {'coupling': 'paper'}}, duration_s=1.0)
     cons, _ = run(duration_s=1.0)
     warn = messages.ledger_message(paper.energy_ledger(), 1.0).status[0]

@@ -1,4 +1,7 @@
-"""Truncated and corrupted MCAP recordings into the reader, `pulsejet summary`, `plot`, `resim` and
+"""
+Truncated and corrupted MCAP recordings: a clear error or what can be read.
+
+Truncated and corrupted MCAP recordings into the reader, `pulsejet summary`, `plot`, `resim` and
 replay's file loading (hypothesis): a clear error or the part that can be read, never a hang, never
 a traceback.
 
@@ -6,32 +9,36 @@ The recording is a real offline run (`escape`, the scene stored in the file so `
 nothing else) written in small chunks, so that a cut or a flipped byte lands in one of many chunks.
 `check_*` functions return an outcome label; benchmarks/reliability_table.py reuses them.
 """
+
 from __future__ import annotations
 
 import contextlib
 import io
 import os
-import random
 from pathlib import Path
+import random
 
-import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-
 from pulsejet_sim import analysis, replay, resim
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, iter_bag
 from pulsejet_sim.bag.writer import BagWriter
+import pytest
 
 EXAMPLES = int(os.environ.get('PULSEJET_FUZZ_EXAMPLES', '40'))
-FUZZ = settings(max_examples=EXAMPLES, deadline=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+FUZZ = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 CHUNK_BYTES = 2048
 
 
 def make_recording(path: Path, duration_s: float = 0.3) -> Path:
-    """An offline run of `escape` (scene stored in the file), chunked every CHUNK_BYTES."""
+    """Make an offline run of `escape` (scene stored in the file), chunked every CHUNK_BYTES."""
     from pulsejet_sim.runner import run_scene
     from pulsejet_sim.scene import load_scene
+
     defaults = BagWriter.__init__.__kwdefaults__
     old = defaults['chunk_size_bytes']
     defaults['chunk_size_bytes'] = CHUNK_BYTES
@@ -44,18 +51,24 @@ def make_recording(path: Path, duration_s: float = 0.3) -> Path:
 
 def read_messages(path: Path) -> tuple[list[tuple[str, int, bytes]], BagInfo]:
     info = BagInfo(path)
-    return [(m.topic, m.log_time_ns, bytes(m.msg)) for m in iter_bag(path, info=info, decode=False)], info
+    return [
+        (m.topic, m.log_time_ns, bytes(m.msg)) for m in iter_bag(path, info=info, decode=False)
+    ], info
 
 
 class Recording:
+
     def __init__(self, path: Path) -> None:
         self.path = path
         self.data = path.read_bytes()
         self.messages, self.info = read_messages(path)
         from mcap.reader import make_reader
+
         with open(path, 'rb') as fh:
             summary = make_reader(fh).get_summary()
-        self.chunk_ends = sorted(c.chunk_start_offset + c.chunk_length for c in summary.chunk_indexes)
+        self.chunk_ends = sorted(
+            c.chunk_start_offset + c.chunk_length for c in summary.chunk_indexes
+        )
         assert len(self.chunk_ends) >= 10, 'the fixture should have many chunks'
 
 
@@ -72,14 +85,20 @@ def _quiet(fn, *args):
 
 
 def check_tools(path: Path, plot: bool = False) -> dict[str, str]:
-    """Run every file consumer on `path`; each must return a clear exit code or error, not raise."""
+    """
+    Run every file consumer on `path`.
+
+    Each must return a clear exit code or error, not raise.
+    """
     outcomes = {}
     code, out, err = _quiet(analysis.main_summary, [str(path)])
     assert code in (0, 2), (code, err)
     assert code == 0 or (err.startswith('pulsejet summary: error:') and err.count('\n') == 1), err
     outcomes['summary'] = 'ok' if code == 0 else 'refused'
     if plot:
-        code, out, err = _quiet(analysis.main_plot, [str(path), '--out', str(path.with_suffix('.png'))])
+        code, out, err = _quiet(
+            analysis.main_plot, [str(path), '--out', str(path.with_suffix('.png'))]
+        )
         assert code in (0, 2), err
         outcomes['plot'] = 'ok' if code == 0 else 'refused'
     code, out, err = _quiet(resim.main_resim, [str(path)])
@@ -97,7 +116,11 @@ def check_tools(path: Path, plot: bool = False) -> dict[str, str]:
 
 
 def check_truncation(rec: Recording, cut: int, tmp_dir: Path, tools: bool = True) -> str:
-    """A file cut at byte `cut`: a prefix of the messages, at least every complete chunk's."""
+    """
+    Check a file cut at byte `cut`.
+
+    It gives a prefix of the messages, at least every complete chunk's.
+    """
     path = tmp_dir / 'cut.mcap'
     path.write_bytes(rec.data[:cut])
     try:
@@ -105,11 +128,13 @@ def check_truncation(rec: Recording, cut: int, tmp_dir: Path, tools: bool = True
     except BagReadError as exc:
         assert cut < 200, f'a cut at byte {cut} (after the header) must still be readable: {exc}'
         return 'refused'
-    assert messages == rec.messages[:len(messages)], 'not a prefix of the recording'
+    assert messages == rec.messages[: len(messages)], 'not a prefix of the recording'
     complete = sum(1 for end in rec.chunk_ends if end <= cut)
     if complete:
         needed = read_messages_count_until(rec, complete)
-        assert len(messages) >= needed, f'cut at {cut}: {len(messages)} < {needed} messages of complete chunks'
+        assert (
+            len(messages) >= needed
+        ), f'cut at {cut}: {len(messages)} < {needed} messages of complete chunks'
     assert info.valid_bytes <= cut and info.bytes_dropped == cut - info.valid_bytes
     assert info.damaged == (cut < len(rec.data)) == info.truncated
     if tools:
@@ -143,9 +168,11 @@ def corrupt(data: bytes, seed: int, kind: str) -> bytes:
     elif kind == 'zero':
         i = rnd.randrange(8, len(buf))
         buf[i:i + rnd.randint(1, 4096)] = b'\0' * min(4096, len(buf) - i)
-    elif kind == 'length':     # a record length field set to something huge
+    elif kind == 'length':  # a record length field set to something huge
         i = rnd.randrange(9, len(buf) - 8)
-        buf[i:i + 8] = rnd.choice([b'\xff' * 8, (1 << 40).to_bytes(8, 'little'), (2**63).to_bytes(8, 'little')])
+        buf[i:i + 8] = rnd.choice(
+            [b'\xff' * 8, (1 << 40).to_bytes(8, 'little'), (2**63).to_bytes(8, 'little')]
+        )
     elif kind == 'insert':
         i = rnd.randrange(8, len(buf))
         buf[i:i] = bytes(rnd.randrange(256) for _ in range(rnd.randint(1, 64)))
@@ -155,9 +182,14 @@ def corrupt(data: bytes, seed: int, kind: str) -> bytes:
     return bytes(buf)
 
 
-def check_corruption(rec: Recording, seed: int, kind: str, tmp_dir: Path, tools: bool = True) -> str:
-    """A damaged file: only messages of the recording come out (a damaged chunk is skipped, never
-    returned as garbage), or a clear BagReadError."""
+def check_corruption(
+    rec: Recording, seed: int, kind: str, tmp_dir: Path, tools: bool = True
+) -> str:
+    """
+    Check a damaged file: only messages of the recording come out, or a clear BagReadError.
+
+    A damaged chunk is skipped, never returned as garbage.
+    """
     path = tmp_dir / 'bad.mcap'
     path.write_bytes(corrupt(rec.data, seed, kind))
     try:
@@ -178,8 +210,9 @@ def check_corruption(rec: Recording, seed: int, kind: str, tmp_dir: Path, tools:
 @pytest.mark.timeout(180)
 @FUZZ
 @given(fraction=st.floats(min_value=0.0, max_value=1.0), tools=st.booleans())
-def test_truncated_file_reads_complete_chunks(recording: Recording, fraction: float, tools: bool,
-                                              tmp_path_factory) -> None:
+def test_truncated_file_reads_complete_chunks(
+    recording: Recording, fraction: float, tools: bool, tmp_path_factory
+) -> None:
     cut = int(fraction * len(recording.data))
     check_truncation(recording, cut, tmp_path_factory.mktemp('cut'), tools=tools)
 
@@ -193,28 +226,44 @@ def test_every_chunk_boundary(recording: Recording, tmp_path: Path) -> None:
 
 @pytest.mark.timeout(180)
 @FUZZ
-@given(seed=st.integers(0, 2**32 - 1),
-       kind=st.sampled_from(['flip', 'overwrite', 'zero', 'length', 'insert', 'delete']), tools=st.booleans())
-def test_corrupted_file_gives_clear_error_or_readable_part(recording: Recording, seed: int, kind: str,
-                                                           tools: bool, tmp_path_factory) -> None:
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    kind=st.sampled_from(['flip', 'overwrite', 'zero', 'length', 'insert', 'delete']),
+    tools=st.booleans(),
+)
+def test_corrupted_file_gives_clear_error_or_readable_part(
+    recording: Recording, seed: int, kind: str, tools: bool, tmp_path_factory
+) -> None:
     check_corruption(recording, seed, kind, tmp_path_factory.mktemp('bad'), tools=tools)
 
 
 @pytest.mark.timeout(120)
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(['flip', 'overwrite', 'length']))
-def test_plot_of_damaged_file(recording: Recording, seed: int, kind: str, tmp_path_factory) -> None:
+def test_plot_of_damaged_file(
+    recording: Recording, seed: int, kind: str, tmp_path_factory
+) -> None:
     path = tmp_path_factory.mktemp('plot') / 'bad.mcap'
     path.write_bytes(corrupt(recording.data, seed, kind))
     outcomes = check_tools(path, plot=True)
     assert outcomes['plot'] in ('ok', 'refused')
 
 
-@pytest.mark.parametrize('content, expected', [
-    (b'', 'empty file'), (b'\x89MC', 'cut short'), (b'\x89MCAP1\r\n' + b'\0' * 40, "major version '1'"),
-    (b'PK\x03\x04zipfile', 'not an MCAP file'), (b'\x89MCAP0\r\n', 'no readable'),
-])
-def test_tiny_and_foreign_files_are_refused_clearly(tmp_path: Path, content: bytes, expected: str) -> None:
+@pytest.mark.parametrize(
+    'content, expected',
+    [
+        (b'', 'empty file'),
+        (b'\x89MC', 'cut short'),
+        (b'\x89MCAP1\r\n' + b'\0' * 40, "major version '1'"),
+        (b'PK\x03\x04zipfile', 'not an MCAP file'),
+        (b'\x89MCAP0\r\n', 'no readable'),
+    ],
+)
+def test_tiny_and_foreign_files_are_refused_clearly(
+    tmp_path: Path, content: bytes, expected: str
+) -> None:
     path = tmp_path / 'x.mcap'
     path.write_bytes(content)
     if expected == 'no readable':

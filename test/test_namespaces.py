@@ -1,18 +1,22 @@
-"""Two robots in one ROS domain: `--ros-args -r __ns:=/robotN` puts every topic, service and the
+"""
+Two robots in one ROS domain, each under a namespace of its own.
+
+Two robots in one ROS domain: `--ros-args -r __ns:=/robotN` puts every topic, service and the
 diagnostic status of each sim_node under its own name; each publishes nav_msgs/Odometry with the
-configured REP 105 frames. Real processes, real DDS."""
+configured REP 105 frames. Real processes, real DDS.
+"""
+
 import subprocess
 import time
 
-import pytest
-import rclpy
+from conftest import isolate_ros
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
+from pulsejet_sim.node_params import node_command
+import pytest
+import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-from conftest import isolate_ros
-from pulsejet_sim.node_params import node_command
 
 
 @pytest.mark.timeout(180)
@@ -20,29 +24,44 @@ def test_two_namespaced_robots_in_one_domain(monkeypatch, tmp_path):
     domain = isolate_ros(monkeypatch, 57)
     procs = []
     for ns, frame in (('robot1', 'robot1/base_link'), ('robot2', 'robot2/base_link')):
-        cmd = node_command('pulsejet_sim.sim_node', {'scene': 'pump_cycle', 'base_frame_id': frame,
-                                                     'odom_frame_id': f'{ns}/odom'}) + ['-r', f'__ns:=/{ns}']
+        cmd = node_command(
+            'pulsejet_sim.sim_node',
+            {'scene': 'pump_cycle', 'base_frame_id': frame, 'odom_frame_id': f'{ns}/odom'},
+        ) + ['-r', f'__ns:=/{ns}']
         log = open(tmp_path / f'{ns}.log', 'wb')
         procs.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), log))
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(
+        context=context,
+        domain_id=domain,
+        signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+    )
     node = rclpy.create_node('namespace_probe', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     odometry, statuses = {}, set()
     qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     for ns in ('robot1', 'robot2'):
-        node.create_subscription(Odometry, f'/{ns}/odom', lambda m, ns=ns: odometry.setdefault(ns, m), qos)
-    node.create_subscription(DiagnosticArray, '/diagnostics',
-                             lambda m: statuses.update(s.name for s in m.status), qos)
+        node.create_subscription(
+            Odometry, f'/{ns}/odom', lambda m, ns=ns: odometry.setdefault(ns, m), qos
+        )
+    node.create_subscription(
+        DiagnosticArray, '/diagnostics', lambda m: statuses.update(s.name for s in m.status), qos
+    )
     try:
         end = time.monotonic() + 120
         while time.monotonic() < end and not (len(odometry) == 2 and len(statuses) >= 2):
             executor.spin_once(timeout_sec=0.05)
         names = {name for name, _ in node.get_topic_names_and_types()}
         for ns in ('robot1', 'robot2'):
-            for topic in ('odom', 'pulsejet/velocity', 'pulsejet/volume', 'pulsejet/applied_command',
-                          'pulsejet/cmd/command', 'pulsejet/cmd/pump_flow'):
+            for topic in (
+                'odom',
+                'pulsejet/velocity',
+                'pulsejet/volume',
+                'pulsejet/applied_command',
+                'pulsejet/cmd/command',
+                'pulsejet/cmd/pump_flow',
+            ):
                 assert f'/{ns}/{topic}' in names, (ns, topic, sorted(names))
         services = {name for name, _ in node.get_service_names_and_types()}
         assert {'/robot1/pulsejet/reset', '/robot2/pulsejet/reset'} <= services
@@ -65,36 +84,62 @@ def test_two_namespaced_robots_in_one_domain(monkeypatch, tmp_path):
 
 @pytest.mark.timeout(180)
 def test_shell_mantle_marker_is_the_revolved_meridian(monkeypatch, tmp_path):
-    """sim_node (shell robot) publishes the mantle surface as a TRIANGLE_LIST Marker in the body
-    frame: every vertex lies on a circle of a meridian node's radius about the swimming axis."""
+    """
+    The shell robot publishes its mantle surface as the revolved meridian.
+
+    sim_node (shell robot) publishes the mantle surface as a TRIANGLE_LIST Marker in the body
+    frame: every vertex lies on a circle of a meridian node's radius about the swimming axis.
+    """
     import math
+
     from geometry_msgs.msg import PolygonStamped
-    from visualization_msgs.msg import Marker
     from pulsejet_sim import messages
+    from visualization_msgs.msg import Marker
+
     domain = isolate_ros(monkeypatch, 59)
     log = open(tmp_path / 'sim.log', 'wb')
-    proc = subprocess.Popen(node_command('pulsejet_sim.sim_node', {'scene': 'shell_robot'}), stdout=log,
-                            stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(
+        node_command('pulsejet_sim.sim_node', {'scene': 'shell_robot'}),
+        stdout=log,
+        stderr=subprocess.STDOUT,
+    )
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(
+        context=context,
+        domain_id=domain,
+        signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+    )
     node = rclpy.create_node('marker_probe', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     got = {}
     qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
-    node.create_subscription(Marker, messages.TOPIC_MANTLE_MARKER, lambda m: got.setdefault('marker', m), qos)
+    node.create_subscription(
+        Marker, messages.TOPIC_MANTLE_MARKER, lambda m: got.setdefault('marker', m), qos
+    )
     profiles = {}
-    node.create_subscription(PolygonStamped, messages.TOPIC_MANTLE_PROFILE,
-                             lambda m: profiles.__setitem__((m.header.stamp.sec, m.header.stamp.nanosec), m), qos)
+    node.create_subscription(
+        PolygonStamped,
+        messages.TOPIC_MANTLE_PROFILE,
+        lambda m: profiles.__setitem__((m.header.stamp.sec, m.header.stamp.nanosec), m),
+        qos,
+    )
     try:
         end = time.monotonic() + 120
         while time.monotonic() < end and 'marker' not in got:
             executor.spin_once(timeout_sec=0.05)
         marker = got['marker']
-        assert marker.type == Marker.TRIANGLE_LIST and marker.header.frame_id == messages.BASE_FRAME_ID
-        profile = profiles[(marker.header.stamp.sec, marker.header.stamp.nanosec)].polygon.points  # same state
+        assert (
+            marker.type == Marker.TRIANGLE_LIST
+            and marker.header.frame_id == messages.BASE_FRAME_ID
+        )
+        profile = profiles[
+            (marker.header.stamp.sec, marker.header.stamp.nanosec)
+        ].polygon.points  # same state
         assert len(marker.points) == 6 * messages.MANTLE_MARKER_SEGMENTS * (len(profile) - 1)
-        meridian = {(round(p.x, 5), round(p.y, 5)) for p in profile}      # (axial, radius) of each node
+        meridian = {
+            (round(p.x, 5), round(p.y, 5)) for p in profile
+        }  # (axial, radius) of each node
         assert {(round(p.x, 5), round(math.hypot(p.y, p.z), 5)) for p in marker.points} == meridian
     finally:
         executor.shutdown()

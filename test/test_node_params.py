@@ -1,23 +1,26 @@
-"""Node parameters over real processes (own DDS domain, localhost discovery; no mocks):
-sim_node's structured scene overrides (`-p scene.<section>.<key>:=value` and a nested `scene:` block
-in a params file), the descriptors of replay and recorder through the real DescribeParameters
-service, and controller_node following a best-effort /clock through rclpy's time source
-(`use_sim_time`, true by default for it, `-p use_sim_time:=false` still honoured)."""
+"""
+Node parameters over real processes (own DDS domain, localhost discovery; no mocks).
+
+What they cover: sim_node's structured scene overrides (`-p scene.<section>.<key>:=value` and a
+nested `scene:` block in a params file), the descriptors of replay and recorder through the real
+DescribeParameters service, and controller_node following a best-effort /clock through rclpy's
+time source (`use_sim_time`, true by default for it, `-p use_sim_time:=false` still honoured).
+"""
+
 from __future__ import annotations
 
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
-import pytest
 from conftest import isolate_ros
-
-from pulsejet_sim.node_params import ParamSpec, node_command, scene_overrides
+from pulsejet_sim.node_params import node_command, ParamSpec, scene_overrides
+import pytest
 
 rclpy = pytest.importorskip('rclpy')
-from builtin_interfaces.msg import Time  # noqa: E402
+from builtin_interfaces.msg import Time  # noqa: E402, I100
 from rcl_interfaces.msg import ParameterType  # noqa: E402
 from rcl_interfaces.srv import DescribeParameters, GetParameters  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
@@ -38,8 +41,13 @@ def domain(monkeypatch):
 
 def run_sim_node(*ros_args: str) -> subprocess.CompletedProcess:
     """sim_node to completion (a short duration_s, or a refused scene), output captured."""
-    return subprocess.run([sys.executable, '-m', 'pulsejet_sim.sim_node', '--ros-args', *ros_args],
-                          capture_output=True, text=True, timeout=150, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, '-m', 'pulsejet_sim.sim_node', '--ros-args', *ros_args],
+        capture_output=True,
+        text=True,
+        timeout=150,
+        cwd=ROOT,
+    )
 
 
 def stop(proc: subprocess.Popen, timeout: float = 15.0) -> tuple[int, str]:
@@ -55,12 +63,19 @@ def stop(proc: subprocess.Popen, timeout: float = 15.0) -> tuple[int, str]:
 
 
 class Client:
-    """An in-process node in the test's domain: parameter service calls, publishers, subscriptions."""
+    """
+    An in-process node in the test's domain.
+
+    For parameter service calls, publishers and subscriptions.
+    """
 
     def __init__(self, domain: int):
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain,
-                   signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        rclpy.init(
+            context=self.context,
+            domain_id=domain,
+            signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+        )
         self.node = rclpy.create_node('param_test_client', context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -84,11 +99,19 @@ class Client:
             self.node.destroy_client(client)
 
     def describe(self, node: str, names: list[str]) -> dict:
-        response = self.call(DescribeParameters, f'{node}/describe_parameters', DescribeParameters.Request(names=names))
+        response = self.call(
+            DescribeParameters,
+            f'{node}/describe_parameters',
+            DescribeParameters.Request(names=names),
+        )
         return {d.name: d for d in response.descriptors}
 
     def get(self, node: str, names: list[str]) -> list:
-        return list(self.call(GetParameters, f'{node}/get_parameters', GetParameters.Request(names=names)).values)
+        return list(
+            self.call(
+                GetParameters, f'{node}/get_parameters', GetParameters.Request(names=names)
+            ).values
+        )
 
     def close(self):
         self.executor.shutdown()
@@ -103,27 +126,52 @@ def client(domain):
     c.close()
 
 
-# ---- structured scene overrides --------------------------------------------------------------------
+# ---- structured scene overrides -----------------------------------------------------------------
 def test_scene_override_parameters_nest_into_scene_sections():
-    flat = {'scene.geometry.nozzle_radius_m': 0.01, 'scene.options.coupling': 'paper', 'scene.geometry.length_m': 1}
-    assert scene_overrides(flat) == {'geometry': {'nozzle_radius_m': 0.01, 'length_m': 1},
-                                     'options': {'coupling': 'paper'}}
-    with pytest.raises(ValueError, match=r'scene\.geometry\.length_m=0\.3 conflicts with scene\.geometry'):
+    flat = {
+        'scene.geometry.nozzle_radius_m': 0.01,
+        'scene.options.coupling': 'paper',
+        'scene.geometry.length_m': 1,
+    }
+    assert scene_overrides(flat) == {
+        'geometry': {'nozzle_radius_m': 0.01, 'length_m': 1},
+        'options': {'coupling': 'paper'},
+    }
+    with pytest.raises(
+        ValueError, match=r'scene\.geometry\.length_m=0\.3 conflicts with scene\.geometry'
+    ):
         scene_overrides({'scene.geometry': 3, 'scene.geometry.length_m': 0.3})
-    with pytest.raises(ValueError, match=r"'scene\.\.x' rejected; allowed: scene\.<section>\.<key>"):
+    with pytest.raises(
+        ValueError, match=r"'scene\.\.x' rejected; allowed: scene\.<section>\.<key>"
+    ):
         scene_overrides({'scene..x': 1})
 
 
 @pytest.mark.timeout(180)
 def test_sim_node_applies_scene_overrides_from_the_command_line(domain):
-    """`-p scene.simulation.dt_s:=...` wins over the same key in the string scene_overrides, which
-    still works; both reach the model (sim_node reports the step and rate of the scene it built)."""
-    proc = run_sim_node('-p', 'scene:=pump_cycle', '-p', 'duration_s:=0.05',
-                        '-p', "scene_overrides:='{simulation: {dt_s: 2.0e-4, publish_rate_hz: 50}}'",
-                        '-p', 'scene.simulation.dt_s:=5.0e-5', '-p', 'scene.options.coupling:=paper')
+    """
+    Scene overrides from the command line win over scene_overrides and reach the model.
+
+    `-p scene.simulation.dt_s:=...` wins over the same key in the string scene_overrides, which
+    still works; both reach the model (sim_node reports the step and rate of the scene it built).
+    """
+    proc = run_sim_node(
+        '-p',
+        'scene:=pump_cycle',
+        '-p',
+        'duration_s:=0.05',
+        '-p',
+        "scene_overrides:='{simulation: {dt_s: 2.0e-4, publish_rate_hz: 50}}'",
+        '-p',
+        'scene.simulation.dt_s:=5.0e-5',
+        '-p',
+        'scene.options.coupling:=paper',
+    )
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out[-3000:]
-    assert "scene overrides: scene.options.coupling='paper', scene.simulation.dt_s=5e-05" in out, out[-3000:]
+    assert (
+        "scene overrides: scene.options.coupling='paper', scene.simulation.dt_s=5e-05" in out
+    ), out[-3000:]
     # dt from the structured parameter, the rate from the string: 0.02 s / 5e-5 s = 400 steps
     assert 'dt 5e-05 s), publishing every 400 steps (50 Hz)' in out, out[-3000:]
 
@@ -131,12 +179,14 @@ def test_sim_node_applies_scene_overrides_from_the_command_line(domain):
 @pytest.mark.timeout(180)
 def test_sim_node_applies_a_nested_scene_block_of_a_params_file(domain, tmp_path):
     params = tmp_path / 'params.yaml'
-    params.write_text('sim_node:\n'
-                      '  ros__parameters:\n'
-                      '    duration_s: 0.05\n'
-                      '    scene:                  # rcl flattens this to scene.simulation.publish_rate_hz\n'
-                      '      simulation:\n'
-                      '        publish_rate_hz: 20\n')
+    params.write_text(
+        'sim_node:\n'
+        '  ros__parameters:\n'
+        '    duration_s: 0.05\n'
+        '    scene:                  # rcl flattens this to scene.simulation.publish_rate_hz\n'
+        '      simulation:\n'
+        '        publish_rate_hz: 20\n'
+    )
     # the scene's name cannot sit in the same nested block: it comes from the command line here
     proc = run_sim_node('--params-file', str(params), '-p', 'scene:=pump_cycle')
     out = proc.stdout + proc.stderr
@@ -146,39 +196,66 @@ def test_sim_node_applies_a_nested_scene_block_of_a_params_file(domain, tmp_path
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize('override, named', [
-    ('scene.bogus.x:=1', "scene 'pump_cycle': bogus: unknown section for the lumped model; allowed: model,"),
-    ('scene.geometry.bogus_m:=0.1', "geometry.bogus_m: unknown key"),
-    ('scene.geometry.nozzle_radius_m:=abc', "geometry.nozzle_radius_m: 'abc' is not a number; allowed:"),
-], ids=['unknown-section', 'unknown-key', 'bad-value'])
+@pytest.mark.parametrize(
+    'override, named',
+    [
+        (
+            'scene.bogus.x:=1',
+            "scene 'pump_cycle': bogus: unknown section for the lumped model; allowed: model,",
+        ),
+        ('scene.geometry.bogus_m:=0.1', 'geometry.bogus_m: unknown key'),
+        (
+            'scene.geometry.nozzle_radius_m:=abc',
+            "geometry.nozzle_radius_m: 'abc' is not a number; allowed:",
+        ),
+    ],
+    ids=['unknown-section', 'unknown-key', 'bad-value'],
+)
 def test_sim_node_refuses_a_bad_scene_override(domain, override, named):
     proc = run_sim_node('-p', 'scene:=pump_cycle', '-p', override)
     assert proc.returncode == 2, proc.stdout[-2000:] + proc.stderr[-2000:]
-    assert 'sim_node: error: SceneError:' in proc.stderr and named in proc.stderr, proc.stderr[-2000:]
+    assert 'sim_node: error: SceneError:' in proc.stderr and named in proc.stderr, proc.stderr[
+        -2000:
+    ]
 
 
-# ---- descriptors of replay and recorder --------------------------------------------------------------
+# ---- descriptors of replay and recorder ---------------------------------------------------------
 @pytest.mark.timeout(150)
 def test_replay_and_recorder_describe_their_parameters(domain, client, tmp_path):
     from pulsejet_sim import recorder, replay
     from pulsejet_sim.runner import run_scene
     from pulsejet_sim.scene import load_scene
+
     bag = tmp_path / 'escape.mcap'
     run_scene(load_scene('escape'), 0.1, bag)
-    # the replay waits for a /clock subscriber that never comes: it stays up, serving its parameters
-    player = subprocess.Popen(node_command('pulsejet_sim.replay', {'bag': str(bag), 'rate': 2})
-                              + ['-p', "wait_for_topics:=['/clock']"],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
-    rec = subprocess.Popen(node_command('pulsejet_sim.recorder', {'output': str(tmp_path / 'rec.mcap')})
-                           + ['-p', "topics:=['pulsejet/velocity']"],
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+    # the replay waits for a /clock subscriber that never comes: it stays up, serving its
+    # parameters
+    player = subprocess.Popen(
+        node_command('pulsejet_sim.replay', {'bag': str(bag), 'rate': 2})
+        + ['-p', "wait_for_topics:=['/clock']"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        cwd=ROOT,
+    )
+    rec = subprocess.Popen(
+        node_command('pulsejet_sim.recorder', {'output': str(tmp_path / 'rec.mcap')})
+        + ['-p', "topics:=['pulsejet/velocity']"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        cwd=ROOT,
+    )
     try:
         d = client.describe('/replay', list(replay.PARAMETERS))
         assert set(d) == set(replay.PARAMETERS)
         for name, desc in d.items():
             assert desc.description and 'allowed:' in desc.description, (name, desc)
             assert desc.read_only and desc.dynamic_typing, (name, desc)
-        assert 'speed factor' in d['rate'].description and d['rate'].floating_point_range[0].from_value == 0.0
+        assert (
+            'speed factor' in d['rate'].description
+            and d['rate'].floating_point_range[0].from_value == 0.0
+        )
         assert d['clock_rate_hz'].floating_point_range[0].to_value == 10000.0
         assert d['delay_s'].floating_point_range[0].from_value == 0.0
         # the values as set (an int rate kept as given: dynamic typing), the rest their defaults
@@ -203,54 +280,93 @@ def test_string_array_spec_describes_and_checks():
     spec = ParamSpec('topics', ('a', 'b'), 'topics', read_only=True)
     assert spec.descriptor().type == ParameterType.PARAMETER_STRING_ARRAY
     assert spec.check(['x']) == ['x']
-    with pytest.raises(ValueError, match=r"topics=\[3\] rejected; allowed: a list of strings"):
+    with pytest.raises(ValueError, match=r'topics=\[3\] rejected; allowed: a list of strings'):
         spec.check([3])
 
 
-# ---- controller_node on rclpy's time source -----------------------------------------------------------
+# ---- controller_node on rclpy's time source -----------------------------------------------------
 @pytest.mark.timeout(150)
-def test_controller_node_follows_a_best_effort_clock_through_use_sim_time(domain, client, tmp_path):
-    """A best-effort /clock (like a bag player's) drives the routine through use_sim_time, which is
-    on by default; time going back restarts the routine and is answered at once."""
-    params = {'scene': 'pump_cycle', 'pump_flow_m3_s': 1.0e-3, 'inflate_s': 0.5, 'hold_s': 0.1, 'jet_s': 0.4,
-              'cycles': 1, 'target_volume_m3': 0.0, 'rate_hz': 50.0}
+def test_controller_node_follows_a_best_effort_clock_through_use_sim_time(
+    domain, client, tmp_path
+):
+    """
+    A best-effort /clock drives the routine through use_sim_time (on by default).
+
+    A best-effort /clock (like a bag player's) drives the routine through use_sim_time, which is
+    on by default; time going back restarts the routine and is answered at once.
+    """
+    params = {
+        'scene': 'pump_cycle',
+        'pump_flow_m3_s': 1.0e-3,
+        'inflate_s': 0.5,
+        'hold_s': 0.1,
+        'jet_s': 0.4,
+        'cycles': 1,
+        'target_volume_m3': 0.0,
+        'rate_hz': 50.0,
+    }
     log = open(tmp_path / 'controller.log', 'w+')
-    ctrl = subprocess.Popen(node_command('pulsejet_ctrl.controller_node', params), stdout=log,
-                            stderr=subprocess.STDOUT, cwd=ROOT)
+    ctrl = subprocess.Popen(
+        node_command('pulsejet_ctrl.controller_node', params),
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        cwd=ROOT,
+    )
     got = {'pump_flow': [], 'valve': []}
-    subs = [client.node.create_subscription(Float64, f'pulsejet/cmd/{name}',
-                                            lambda m, name=name: got[name].append(m.data), RELIABLE) for name in got]
+    subs = [
+        client.node.create_subscription(
+            Float64,
+            f'pulsejet/cmd/{name}',
+            lambda m, name=name: got[name].append(m.data),
+            RELIABLE,
+        )
+        for name in got
+    ]
     clock_pub = client.node.create_publisher(Clock, '/clock', BEST_EFFORT)
 
     def output():
         log.flush()
         return (tmp_path / 'controller.log').read_text()
+
     try:
-        client.spin_until(lambda: clock_pub.get_subscription_count() >= 1
-                          and all(s.get_publisher_count() > 0 for s in subs), 60.0,
-                          'controller_node to match /clock and its command topics')
+        client.spin_until(
+            lambda: clock_pub.get_subscription_count() >= 1
+            and all(s.get_publisher_count() > 0 for s in subs),
+            60.0,
+            'controller_node to match /clock and its command topics',
+        )
         (use_sim_time,) = client.get('/controller_node', ['use_sim_time'])
         assert (use_sim_time.type, use_sim_time.bool_value) == (ParameterType.PARAMETER_BOOL, True)
 
         def at(t):
-            """Publish /clock = t (again, best effort may drop a sample) until a command answers it."""
+            """
+            Publish /clock = t until a command answers it.
+
+            It is published again and again: best effort may drop a sample.
+            """
             ns = round(t * 1e9)
             for _ in range(20):
                 n0 = len(got['valve'])
                 clock_pub.publish(Clock(clock=Time(sec=ns // 10**9, nanosec=ns % 10**9)))
                 try:
-                    client.spin_until(lambda: len(got['valve']) > n0 and len(got['pump_flow']) > n0, 0.5, 'a command')
+                    client.spin_until(
+                        lambda: len(got['valve']) > n0 and len(got['pump_flow']) > n0,
+                        0.5,
+                        'a command',
+                    )
                 except AssertionError:
                     continue
-                client.spin_until(lambda: len(got['pump_flow']) == len(got['valve']), 2.0, 'both commands')
+                client.spin_until(
+                    lambda: len(got['pump_flow']) == len(got['valve']), 2.0, 'both commands'
+                )
                 return got['pump_flow'][-1], got['valve'][-1]
             raise AssertionError(f'no command for /clock {t} s:\n{output()[-2000:]}')
 
-        assert at(0.3) == (1.0e-3, 0.0)      # inflating
-        assert at(0.55) == (0.0, 0.0)        # hold
-        assert at(0.7) == (0.0, 1.0)         # jet
-        assert at(1.2) == (0.0, 1.0)         # one cycle done: valve left open
-        assert at(0.1) == (1.0e-3, 0.0)      # time went back: the routine restarts (inflating again)
+        assert at(0.3) == (1.0e-3, 0.0)  # inflating
+        assert at(0.55) == (0.0, 0.0)  # hold
+        assert at(0.7) == (0.0, 1.0)  # jet
+        assert at(1.2) == (0.0, 1.0)  # one cycle done: valve left open
+        assert at(0.1) == (1.0e-3, 0.0)  # time went back: the routine restarts (inflating again)
         assert 'restarting the routine' in output()
     finally:
         code, _ = stop(ctrl)
@@ -260,23 +376,38 @@ def test_controller_node_follows_a_best_effort_clock_through_use_sim_time(domain
 
 @pytest.mark.timeout(120)
 def test_controller_node_on_wall_time_with_use_sim_time_false(domain, client):
-    """`-p use_sim_time:=false` beats the node's own default: commands at rate_hz of wall time,
-    without any /clock."""
+    """
+    `-p use_sim_time:=false` puts controller_node on wall time, without any /clock.
+
+    `-p use_sim_time:=false` beats the node's own default: commands at rate_hz of wall time,
+    without any /clock.
+    """
     params = {'scene': 'pump_cycle', 'rate_hz': 20.0, 'use_sim_time': False}
-    ctrl = subprocess.Popen(node_command('pulsejet_ctrl.controller_node', params),
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+    ctrl = subprocess.Popen(
+        node_command('pulsejet_ctrl.controller_node', params),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        cwd=ROOT,
+    )
     got = []
-    sub = client.node.create_subscription(Float64, 'pulsejet/cmd/pump_flow',
-                                          lambda m: got.append(time.monotonic()), RELIABLE)
+    sub = client.node.create_subscription(
+        Float64, 'pulsejet/cmd/pump_flow', lambda m: got.append(time.monotonic()), RELIABLE
+    )
     try:
-        client.spin_until(lambda: sub.get_publisher_count() > 0, 60.0, 'controller_node\'s command publisher')
+        client.spin_until(
+            lambda: sub.get_publisher_count() > 0, 60.0, "controller_node's command publisher"
+        )
         (use_sim_time,) = client.get('/controller_node', ['use_sim_time'])
-        assert (use_sim_time.type, use_sim_time.bool_value) == (ParameterType.PARAMETER_BOOL, False)
+        assert (use_sim_time.type, use_sim_time.bool_value) == (
+            ParameterType.PARAMETER_BOOL,
+            False,
+        )
         client.spin_until(lambda: len(got) >= 2, 10.0, 'two commands')
         first = len(got)
         t0 = time.monotonic()
         client.spin_until(lambda: time.monotonic() - t0 > 1.0, 5.0, 'one second')
-        assert 10 <= len(got) - first <= 30, len(got) - first     # about 20 per wall second
+        assert 10 <= len(got) - first <= 30, len(got) - first  # about 20 per wall second
     finally:
         code, out = stop(ctrl)
     assert code == 0, out[-2000:]

@@ -1,23 +1,25 @@
-"""The real sim_node (a subprocess) against an in-process probe node over DDS.
+"""
+The real sim_node (a subprocess) against an in-process probe node over DDS.
 
 Every test runs in a ROS domain derived from the pytest pid, with localhost-only discovery.
 """
+
 from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 import signal
 import subprocess
 import time
-from pathlib import Path
 
-import numpy as np
-import pytest
 from conftest import isolate_ros
+import numpy as np
 from pulsejet_sim.node_params import node_command
+import pytest
 
 rclpy = pytest.importorskip('rclpy')
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402, I100
 from geometry_msgs.msg import TwistStamped, WrenchStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -44,8 +46,13 @@ class NodeProcess:
         self.log_path = log_path
         args = node_command(module, params)
         self._log = open(log_path, 'wb')
-        self.proc = subprocess.Popen(args, stdout=self._log, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, env=dict(os.environ))
+        self.proc = subprocess.Popen(
+            args,
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            env=dict(os.environ),
+        )
 
     def output(self) -> str:
         return self.log_path.read_text(errors='replace')
@@ -75,6 +82,7 @@ def start_node(ros_domain, tmp_path):
         p = NodeProcess(module, params, tmp_path / f'{module}.{len(started)}.log')
         started.append(p)
         return p
+
     yield start
     for p in started:
         p.stop(timeout=5.0)
@@ -85,24 +93,36 @@ class Probe:
 
     def __init__(self, domain: int):
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain,
-                   signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        rclpy.init(
+            context=self.context,
+            domain_id=domain,
+            signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+        )
         self.node = rclpy.create_node('probe', context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.received = {}
-        topics = {'/clock': Clock, 'pulsejet/volume': Float64, 'pulsejet/mantle_radius': Float64,
-                  'pulsejet/fluid_mass': Float64, 'pulsejet/velocity': TwistStamped,
-                  'pulsejet/thrust': WrenchStamped, 'pulsejet/energy_ledger': DiagnosticArray}
+        topics = {
+            '/clock': Clock,
+            'pulsejet/volume': Float64,
+            'pulsejet/mantle_radius': Float64,
+            'pulsejet/fluid_mass': Float64,
+            'pulsejet/velocity': TwistStamped,
+            'pulsejet/thrust': WrenchStamped,
+            'pulsejet/energy_ledger': DiagnosticArray,
+        }
         for topic, msg_type in topics.items():
             self.received[topic] = []
             self.node.create_subscription(msg_type, topic, self._store(topic), QOS)
-        self.pub = {name: self.node.create_publisher(Float64, f'pulsejet/cmd/{name}', QOS)
-                    for name in ('pump_flow', 'valve', 'cable_force')}
+        self.pub = {
+            name: self.node.create_publisher(Float64, f'pulsejet/cmd/{name}', QOS)
+            for name in ('pump_flow', 'valve', 'cable_force')
+        }
 
     def _store(self, topic):
         def cb(msg):
             self.received[topic].append((time.monotonic(), msg))
+
         return cb
 
     def spin_for(self, seconds: float):
@@ -129,8 +149,11 @@ class Probe:
         self.pub[name].publish(Float64(data=float(value)))
 
     def wait_for_subscribers(self, timeout=20.0):
-        self.spin_until(lambda: all(p.get_subscription_count() > 0 for p in self.pub.values()),
-                        timeout, 'sim_node to subscribe to the command topics')
+        self.spin_until(
+            lambda: all(p.get_subscription_count() > 0 for p in self.pub.values()),
+            timeout,
+            'sim_node to subscribe to the command topics',
+        )
 
     def close(self):
         self.executor.shutdown()
@@ -169,7 +192,9 @@ def test_publishes_every_topic_stamped_with_sim_time(start_node, probe):
     clocks = [stamp_s(m.clock) for _, m in probe.received['/clock']]
     assert all(b >= a for a, b in zip(clocks, clocks[1:])), 'clock went backwards'
     rate = (sim1 - sim0) / (wall1 - wall0)
-    assert 0.6 < rate < 1.4, f'sim time advanced {sim1 - sim0:.3f} s in {wall1 - wall0:.3f} s of wall time'
+    assert (
+        0.6 < rate < 1.4
+    ), f'sim time advanced {sim1 - sim0:.3f} s in {wall1 - wall0:.3f} s of wall time'
 
     for topic, msgs in probe.received.items():
         assert msgs, f'nothing received on {topic}'
@@ -183,8 +208,9 @@ def test_publishes_every_topic_stamped_with_sim_time(start_node, probe):
     for topic in ('pulsejet/velocity', 'pulsejet/thrust'):
         stamps = [stamp_s(m.header.stamp) for _, m in probe.received[topic]]
         assert max(stamps) < 1e6, f'{topic} stamped with wall time: {stamps[-1]}'
-        assert all(round(s, 9) in clock_set for s in stamps[1:-1]), \
-            f'{topic} stamps not on the /clock instants: {stamps[:5]} vs {clocks[:5]}'
+        assert all(
+            round(s, 9) in clock_set for s in stamps[1:-1]
+        ), f'{topic} stamps not on the /clock instants: {stamps[:5]} vs {clocks[:5]}'
         assert probe.last(topic).header.frame_id == 'pulsejet/body'
     ledger = probe.last('pulsejet/energy_ledger')
     assert stamp_s(ledger.header.stamp) < 1e6
@@ -192,7 +218,9 @@ def test_publishes_every_topic_stamped_with_sim_time(start_node, probe):
     assert {'in_actuation_work', 'out_jet_kinetic', 'closure_error'} <= keys, keys
     n_ledger = len(probe.received['pulsejet/energy_ledger'])
     n_clock = len(probe.received['/clock'])
-    assert n_ledger < n_clock / 3, f'ledger published {n_ledger} times vs {n_clock} clock messages (~5 Hz expected)'
+    assert (
+        n_ledger < n_clock / 3
+    ), f'ledger published {n_ledger} times vs {n_clock} clock messages (~5 Hz expected)'
 
 
 def volume_series(probe, since_wall):
@@ -203,15 +231,25 @@ def volume_series(probe, since_wall):
 def test_bad_commands_rejected_good_ones_applied(tmp_path):
     from pulsejet_sim.harness import SimHarness
     from pulsejet_sim.models.base import Command
-    with SimHarness(scene='pump_cycle', parameters={'real_time_factor': 1.0, 'publish_rate_hz': 50.0}, log_dir=tmp_path) as h:
+
+    with SimHarness(
+        scene='pump_cycle',
+        parameters={'real_time_factor': 1.0, 'publish_rate_hz': 50.0},
+        log_dir=tmp_path,
+    ) as h:
         h.wait_for(lambda s: s.time_s >= 0.3, 60.0)
         # idle (the scene's initial command: pump off): the cavity volume is at rest
         h.spin(0.5)
         v_rest = h.latest.volume_m3
 
-        bad = [('pump_flow_m3_s', float('nan'), 'nan'), ('pump_flow_m3_s', float('inf'), 'inf'),
-               ('pump_flow_m3_s', -1.0, '-1.0'), ('valve_opening', 2.0, '2.0'),
-               ('valve_opening', float('nan'), 'nan'), ('cable_force_n', -5.0, '-5.0')]
+        bad = [
+            ('pump_flow_m3_s', float('nan'), 'nan'),
+            ('pump_flow_m3_s', float('inf'), 'inf'),
+            ('pump_flow_m3_s', -1.0, '-1.0'),
+            ('valve_opening', 2.0, '2.0'),
+            ('valve_opening', float('nan'), 'nan'),
+            ('cable_force_n', -5.0, '-5.0'),
+        ]
         t_bad = time.monotonic()
         for field, value, _ in bad:
             h.send(**{field: value})
@@ -221,26 +259,35 @@ def test_bad_commands_rejected_good_ones_applied(tmp_path):
         for field, _, text in bad:
             low, high = Command.LIMITS[field]
             expected = f'{field}={text}'
-            assert any(expected in line and f'[{low}, {high}]' in line and 'WARN' in line
-                       for line in out.splitlines()), f'no warning naming {expected} and [{low}, {high}]:\n{out[-3000:]}'
+            assert any(
+                expected in line and f'[{low}, {high}]' in line and 'WARN' in line
+                for line in out.splitlines()
+            ), f'no warning naming {expected} and [{low}, {high}]:\n{out[-3000:]}'
         after = [s.volume_m3 for s in h.states if s.wall_s >= t_bad]
-        assert after and all(math.isfinite(v) for v in after), 'non-finite volume after bad commands'
-        assert max(abs(v - v_rest) for v in after) <= 0.01 * abs(v_rest) + 1e-12, \
-            f'state changed after rejected commands: rest {v_rest}, after {min(after)}..{max(after)}'
+        assert after and all(
+            math.isfinite(v) for v in after
+        ), 'non-finite volume after bad commands'
+        assert max(abs(v - v_rest) for v in after) <= 0.01 * abs(v_rest) + 1e-12, (
+            f'state changed after rejected commands: rest {v_rest}, after'
+            f' {min(after)}..{max(after)}'
+        )
         assert h.latest.time_s > 0.5
 
         # a valid command takes effect: valve shut + pump on inflates the cavity
         low, high = Command.LIMITS['pump_flow_m3_s']
-        flow = min(high, max(1e-4, abs(v_rest) * 0.5))   # about half the rest volume per second
+        flow = min(high, max(1e-4, abs(v_rest) * 0.5))  # about half the rest volume per second
         h.send(valve_opening=0.0, pump_flow_m3_s=flow)
-        h.wait_for(lambda s: s.volume_m3 > v_rest * 1.05, 10.0,
-                   f'the volume to rise above {v_rest * 1.05:.3e} m^3 with pump {flow:.3e} m^3/s')
+        h.wait_for(
+            lambda s: s.volume_m3 > v_rest * 1.05,
+            10.0,
+            f'the volume to rise above {v_rest * 1.05:.3e} m^3 with pump {flow:.3e} m^3/s',
+        )
         assert 'WARN' not in h.output()[len(out):], h.output()[len(out):]
 
 
 @pytest.mark.timeout(120)
 def test_exits_after_duration(start_node):
-    sim = start_node(duration_s=0.5, real_time_factor=2)   # an integer is accepted for a number
+    sim = start_node(duration_s=0.5, real_time_factor=2)  # an integer is accepted for a number
     sim.proc.wait(timeout=90)
     out = sim.output()
     assert sim.proc.returncode == 0, out[-3000:]
@@ -269,42 +316,78 @@ def test_rejects_invalid_parameter(start_node):
 
 @pytest.mark.timeout(120)
 def test_blow_up_stops_stepping_without_nan(tmp_path):
-    """Paper 001's equations as written (escape, paper coupling) collapse the shell at ~3 s: the
+    """
+    A blow-up stops stepping and publishing, never publishes NaN; the node stays up.
+
+    Paper 001's equations as written (escape, paper coupling) collapse the shell at ~3 s: the
     node logs the cause, stops stepping and publishing, never publishes NaN and stays up. (A pump
-    can no longer over-inflate the shell: its pressure-flow curve stalls it.)"""
+    can no longer over-inflate the shell: its pressure-flow curve stalls it.)
+    """
     from pulsejet_sim.harness import SimHarness
-    with SimHarness(scene='escape', parameters={'real_time_factor': 2.0, 'publish_rate_hz': 50.0,
-                                                'scene_overrides': {'options': {'coupling': 'paper'}}},
-                    log_dir=tmp_path) as h:
+
+    with SimHarness(
+        scene='escape',
+        parameters={
+            'real_time_factor': 2.0,
+            'publish_rate_hz': 50.0,
+            'scene_overrides': {'options': {'coupling': 'paper'}},
+        },
+        log_dir=tmp_path,
+    ) as h:
         h.wait_for(lambda s: s.time_s >= 0.1, 60.0)
         h.spin_until(lambda: 'physics blew up' in h.output(), 30.0, 'the physics to blow up')
         h.spin(0.5)
         t_stop, n_clock = h.latest.time_s, len(h.states)
         h.spin(1.0)
-        assert h.processes['sim_node'].alive(), f'sim_node died on a blow-up:\n{h.output()[-3000:]}'
-        line = next(l for l in h.output().splitlines() if 'physics blew up' in l)
+        assert h.processes[
+            'sim_node'
+        ].alive(), f'sim_node died on a blow-up:\n{h.output()[-3000:]}'
+        line = next(ln for ln in h.output().splitlines() if 'physics blew up' in ln)
         assert 'ERROR' in line and 'semi-axis' in line, line
-        assert len(h.states) == n_clock and h.latest.time_s == t_stop, 'still publishing after a blow-up'
+        assert (
+            len(h.states) == n_clock and h.latest.time_s == t_stop
+        ), 'still publishing after a blow-up'
         for s in h.states:
-            assert all(math.isfinite(v) for v in (s.volume_m3, s.mantle_radius_m, s.fluid_mass_kg,
-                                                  s.velocity_m_s, s.thrust_n)), s
-    assert h.exit_codes['sim_node'] == 1   # the run failed: non-zero exit even when stopped by a signal
+            assert all(
+                math.isfinite(v)
+                for v in (
+                    s.volume_m3,
+                    s.mantle_radius_m,
+                    s.fluid_mass_kg,
+                    s.velocity_m_s,
+                    s.thrust_n,
+                )
+            ), s
+    assert (
+        h.exit_codes['sim_node'] == 1
+    )  # the run failed: non-zero exit even when stopped by a signal
 
 
 @pytest.mark.timeout(120)
 def test_blow_up_with_duration_exits_non_zero(tmp_path):
     from pulsejet_sim.harness import SimHarness
-    with SimHarness(scene='escape', parameters={'real_time_factor': 2.0, 'duration_s': 60.0,
-                                                'scene_overrides': {'options': {'coupling': 'paper'}}},
-                    log_dir=tmp_path) as h:
+
+    with SimHarness(
+        scene='escape',
+        parameters={
+            'real_time_factor': 2.0,
+            'duration_s': 60.0,
+            'scene_overrides': {'options': {'coupling': 'paper'}},
+        },
+        log_dir=tmp_path,
+    ) as h:
         h.wait_for(lambda s: s.time_s >= 0.1, 60.0)
         assert h.wait_for_exit('sim_node', timeout_s=30.0) == 1, h.output()[-3000:]
         assert 'physics blew up' in h.output()
 
 
 def send_clock_until(probe, clock_pub, stamp, answered, attempts=20):
-    """controller_node takes /clock best effort (so that a bag player's clock works): a sample may
-    be lost, so the same time is sent again until it answers (a repeated time sends nothing more)."""
+    """
+    Send the same /clock time again until controller_node answers it.
+
+    controller_node takes /clock best effort (so that a bag player's clock works): a sample may
+    be lost, so the same time is sent again until it answers (a repeated time sends nothing more).
+    """
     for _ in range(attempts):
         clock_pub.publish(Clock(clock=stamp))
         try:
@@ -317,32 +400,58 @@ def send_clock_until(probe, clock_pub, stamp, answered, attempts=20):
 
 @pytest.mark.timeout(120)
 def test_controller_follows_clock_and_parameter_overrides(start_node, probe):
-    """controller_node driven by a /clock we publish: the routine's phases in simulated time, with
-    parameters overridden on the command line."""
+    """
+    controller_node follows a /clock we publish, with parameters overridden.
+
+    controller_node driven by a /clock we publish: the routine's phases in simulated time, with
+    parameters overridden on the command line.
+    """
     from builtin_interfaces.msg import Time
-    ctrl = start_node('pulsejet_ctrl.controller_node', pump_flow_m3_s=1.0e-3, inflate_s=0.5, hold_s=0.1,
-                      jet_s=0.4, cycles=1, rate_hz=50.0, target_volume_m3=0.0)
+
+    ctrl = start_node(
+        'pulsejet_ctrl.controller_node',
+        pump_flow_m3_s=1.0e-3,
+        inflate_s=0.5,
+        hold_s=0.1,
+        jet_s=0.4,
+        cycles=1,
+        rate_hz=50.0,
+        target_volume_m3=0.0,
+    )
     got = {'pump_flow': [], 'valve': [], 'cable_force': []}
-    subs = [probe.node.create_subscription(Float64, f'pulsejet/cmd/{name}',
-                                           lambda m, name=name: got[name].append(m.data), QOS) for name in got]
+    subs = [
+        probe.node.create_subscription(
+            Float64, f'pulsejet/cmd/{name}', lambda m, name=name: got[name].append(m.data), QOS
+        )
+        for name in got
+    ]
     clock_pub = probe.node.create_publisher(Clock, '/clock', QOS)
-    probe.spin_until(lambda: clock_pub.get_subscription_count() >= 2   # the probe's own + the controller's
-                     and all(s.get_publisher_count() > 0 for s in subs), 60.0,
-                     'controller_node to match /clock and the command topics')
+    probe.spin_until(
+        lambda: clock_pub.get_subscription_count() >= 2  # the probe's own + the controller's
+        and all(s.get_publisher_count() > 0 for s in subs),
+        60.0,
+        'controller_node to match /clock and the command topics',
+    )
 
     def at(t):
         n0 = len(got['valve'])
         ns = round(t * 1e9)
 
-        send_clock_until(probe, clock_pub, Time(sec=ns // 10**9, nanosec=ns % 10**9),
-                         lambda: len(got['valve']) > n0 and len(got['pump_flow']) > n0 and len(got['cable_force']) > n0)
+        send_clock_until(
+            probe,
+            clock_pub,
+            Time(sec=ns // 10**9, nanosec=ns % 10**9),
+            lambda: len(got['valve']) > n0
+            and len(got['pump_flow']) > n0
+            and len(got['cable_force']) > n0,
+        )
         return got['pump_flow'][-1], got['valve'][-1], got['cable_force'][-1]
 
-    assert at(0.0) == (1.0e-3, 0.0, 0.0)          # inflate: pump on, valve shut
+    assert at(0.0) == (1.0e-3, 0.0, 0.0)  # inflate: pump on, valve shut
     assert at(0.3) == (1.0e-3, 0.0, 0.0)
-    assert at(0.55) == (0.0, 0.0, 0.0)            # hold
-    assert at(0.7) == (0.0, 1.0, 0.0)             # jet
-    assert at(1.2) == (0.0, 1.0, 0.0)             # done after 1 cycle: valve left open, pump off
+    assert at(0.55) == (0.0, 0.0, 0.0)  # hold
+    assert at(0.7) == (0.0, 1.0, 0.0)  # jet
+    assert at(1.2) == (0.0, 1.0, 0.0)  # done after 1 cycle: valve left open, pump off
     # no command between two rate ticks (50 Hz of simulated time)
     n = len(got['valve'])
     ns = round(1.205e9)
@@ -357,40 +466,66 @@ def test_controller_follows_clock_and_parameter_overrides(start_node, probe):
 def test_controller_target_volume_mode(start_node, probe):
     """With target_volume_m3 > 0 the inflation ends when pulsejet/volume reaches the target."""
     from builtin_interfaces.msg import Time
-    ctrl = start_node('pulsejet_ctrl.controller_node', pump_flow_m3_s=1.0e-3, inflate_s=100.0,
-                      target_volume_m3=2.0e-3, hold_s=0.1, jet_s=0.4, cycles=0)
+
+    ctrl = start_node(
+        'pulsejet_ctrl.controller_node',
+        pump_flow_m3_s=1.0e-3,
+        inflate_s=100.0,
+        target_volume_m3=2.0e-3,
+        hold_s=0.1,
+        jet_s=0.4,
+        cycles=0,
+    )
     got = []
-    sub = probe.node.create_subscription(Float64, 'pulsejet/cmd/pump_flow', lambda m: got.append(m.data), QOS)
+    sub = probe.node.create_subscription(
+        Float64, 'pulsejet/cmd/pump_flow', lambda m: got.append(m.data), QOS
+    )
     clock_pub = probe.node.create_publisher(Clock, '/clock', QOS)
     volume_pub = probe.node.create_publisher(Float64, 'pulsejet/volume', QOS)
-    probe.spin_until(lambda: clock_pub.get_subscription_count() >= 2 and volume_pub.get_subscription_count() >= 2
-                     and sub.get_publisher_count() > 0, 60.0, 'controller_node to match its topics')
+    probe.spin_until(
+        lambda: clock_pub.get_subscription_count() >= 2
+        and volume_pub.get_subscription_count() >= 2
+        and sub.get_publisher_count() > 0,
+        60.0,
+        'controller_node to match its topics',
+    )
 
     def at(t, volume):
-        for _ in range(3):    # best effort: the volume arrives before the clock tick that uses it
+        for _ in range(3):  # best effort: the volume arrives before the clock tick that uses it
             volume_pub.publish(Float64(data=volume))
             probe.spin_for(0.1)
         n0 = len(got)
         ns = round(t * 1e9)
-        send_clock_until(probe, clock_pub, Time(sec=ns // 10**9, nanosec=ns % 10**9), lambda: len(got) > n0)
+        send_clock_until(
+            probe, clock_pub, Time(sec=ns // 10**9, nanosec=ns % 10**9), lambda: len(got) > n0
+        )
         return got[-1]
 
     assert at(0.0, 1.0e-3) == 1.0e-3
-    assert at(1.0, 1.9e-3) == 1.0e-3     # below the target: still inflating
-    assert at(1.1, 2.05e-3) == 0.0       # target reached: hold
+    assert at(1.0, 1.9e-3) == 1.0e-3  # below the target: still inflating
+    assert at(1.1, 2.05e-3) == 0.0  # target reached: hold
     assert ctrl.stop() == 0, ctrl.output()[-3000:]
 
 
 @pytest.mark.timeout(120)
 def test_lookahead_sends_every_state_once_in_order_through_a_reset(tmp_path):
-    """With lookahead_s the physics runs ahead and a publishing thread sends each state at its wall
+    """
+    With lookahead_s every state is sent once, in order, also through a reset.
+
+    With lookahead_s the physics runs ahead and a publishing thread sends each state at its wall
     time: every period arrives once, in order, and a reset flushes the states computed ahead (they
-    are sent, not lost) before the clock goes back to 0."""
+    are sent, not lost) before the clock goes back to 0.
+    """
     from pulsejet_sim.harness import SimHarness
+
     period = 0.02
-    with SimHarness(scene='pump_cycle', parameters={'publish_rate_hz': 1 / period, 'lookahead_s': 0.2},
-                    log_dir=tmp_path) as h:
+    with SimHarness(
+        scene='pump_cycle',
+        parameters={'publish_rate_hz': 1 / period, 'lookahead_s': 0.2},
+        log_dir=tmp_path,
+    ) as h:
         from std_srvs.srv import Trigger
+
         h.wait_for(lambda s: s.time_s >= 0.6, 60.0)
         last_received = h.latest.time_s
         t_call = time.monotonic()
@@ -403,7 +538,9 @@ def test_lookahead_sends_every_state_once_in_order_through_a_reset(tmp_path):
         times = np.array([s.time_s for s in h.states])
     steps = np.diff(times)
     back = np.flatnonzero(steps < 0)
-    assert back.size == 1, f'the clock went back {back.size} times (expected once, at the reset): {times}'
+    assert (
+        back.size == 1
+    ), f'the clock went back {back.size} times (expected once, at the reset): {times}'
     before, after = times[:back[0] + 1], times[back[0] + 1:]
     assert after[0] == 0.0
     for run in (before, after):

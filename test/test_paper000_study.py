@@ -1,15 +1,21 @@
-"""Paper 000's study (benchmarks/paper000_study.py, ~15 min, not run here): one full case is rerun and
-must match its stored row bit for bit; the stored tables give the verdicts that docs/PHYSICS_SHELL.md
-reports, in each coupling."""
+"""
+Paper 000's study: a rerun case matches its row; the stored tables give the verdicts.
+
+Paper 000's study (benchmarks/paper000_study.py, ~15 min, not run here): one full case is rerun and
+must match its stored row bit for bit; the stored tables give the verdicts that
+docs/PHYSICS_SHELL.md reports, in each coupling.
+"""
+
 import importlib.util
 from pathlib import Path
 
+from pulsejet_sim.sweep import load_sweep, run_one
 import pytest
 
-from pulsejet_sim.sweep import load_sweep, run_one
-
 ROOT = Path(__file__).resolve().parent.parent
-spec = importlib.util.spec_from_file_location('paper000_study', ROOT / 'benchmarks' / 'paper000_study.py')
+spec = importlib.util.spec_from_file_location(
+    'paper000_study', ROOT / 'benchmarks' / 'paper000_study.py'
+)
 study = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(study)
 STORED = study.read_table(study.OUT / 'study.csv')
@@ -39,23 +45,34 @@ def verdicts(coupling):
 
 
 def test_verdicts_of_the_stored_study_as_docs_report_them():
-    """What the model does with the values chosen once (docs/PHYSICS_SHELL.md explains each miss):
-    none of paper 000's five findings holds in either coupling."""
+    """
+    None of paper 000's five findings holds in either coupling.
+
+    What the model does with the values chosen once (docs/PHYSICS_SHELL.md explains each miss):
+    none of paper 000's five findings holds in either coupling.
+    """
     assert verdicts('paper') == [False] * 5
     assert verdicts('consistent') == [False] * 5
 
 
 def test_unresolved_runs_are_the_paper_couplings_closing_nozzles():
-    """Every run within 2 % of its refined twin, except paper-coupling cable runs whose nozzle (the
+    """
+    Every run is resolved except paper-coupling cable runs whose nozzle closes.
+
+    Every run within 2 % of its refined twin, except paper-coupling cable runs whose nozzle (the
     mantle edge) closes onto the axis: with no cavity pressure nothing stops it, and the thrust
-    rho V'^2 / A grows without bound as A shrinks."""
-    unresolved = [(r, f) for r, f in zip(STORED, REFINED)
-                  if abs(r['peak_speed_m_s'] / f['peak_speed_m_s'] - 1.0) > study.CONVERGED]
+    rho V'^2 / A grows without bound as A shrinks.
+    """
+    unresolved = [
+        (r, f)
+        for r, f in zip(STORED, REFINED)
+        if abs(r['peak_speed_m_s'] / f['peak_speed_m_s'] - 1.0) > study.CONVERGED
+    ]
     assert len(unresolved) <= 10
     for r, f in unresolved:
         assert r['coupling'] == 'paper' and r['study'] == 'external', r['run']
     closing = [r for r, _ in unresolved if r['distribution'] == 'rising']
     assert len(closing) >= len(unresolved) - 1
-    assert all(r['peak_speed_m_s'] > 5.0 for r in closing)      # m/s: the runaway jet
+    assert all(r['peak_speed_m_s'] > 5.0 for r in closing)  # m/s: the runaway jet
     consistent = [r for r in STORED if r['coupling'] == 'consistent']
     assert max(r['peak_speed_m_s'] for r in consistent) < 0.5

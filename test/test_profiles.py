@@ -1,25 +1,28 @@
-"""Mantle profiles of a real (short) shell run: cycle snapshots, the plot's snapshot panel, and
-`pulsejet animate` (GIF frames, bad input)."""
+"""
+Mantle profiles of a real (short) shell run.
+
+Cycle snapshots, the plot's snapshot panel, and `pulsejet animate` (GIF frames, bad input).
+"""
+
 from __future__ import annotations
 
 import math
-import shutil
 from pathlib import Path
+import shutil
 
 import numpy as np
-import pytest
 from PIL import Image
-
 from pulsejet_sim import analysis, cli, messages, profiles
 from pulsejet_sim.bag.reader import BagInfo, load_series
 from pulsejet_sim.bag.writer import BagWriter
 from pulsejet_sim.models.base import Command
 from pulsejet_sim.runner import run_scene
 from pulsejet_sim.scene import load_scene
+import pytest
 
-SHELL_S = 0.7            # shell_robot pulls at 1.6 Hz: 0.7 s holds the whole cycle [0, 0.625] s
+SHELL_S = 0.7  # shell_robot pulls at 1.6 Hz: 0.7 s holds the whole cycle [0, 0.625] s
 PERIOD_S = 1.0 / 1.6
-PUBLISH_DT_S = 0.01      # 100 Hz publication: 71 profiles over 0.7 s
+PUBLISH_DT_S = 0.01  # 100 Hz publication: 71 profiles over 0.7 s
 
 
 @pytest.fixture(scope='module')
@@ -43,22 +46,31 @@ def test_snapshots_span_one_cycle(shell_file: Path) -> None:
     period_s, origin_s, source = profiles.cycle_period(shell_file, series, info)
     assert (period_s, origin_s, source) == (pytest.approx(PERIOD_S), 0.0, 'scene')
     read = profiles.read_profiles(shell_file)
-    assert len(read) == round(SHELL_S / PUBLISH_DT_S) + 1 and read.topic == '/pulsejet/mantle_profile'
+    assert (
+        len(read) == round(SHELL_S / PUBLISH_DT_S) + 1 and read.topic == '/pulsejet/mantle_profile'
+    )
     cycle = profiles.last_cycle(read.time_s[0], read.time_s[-1], period_s, origin_s, source)
-    assert cycle.complete and (cycle.start_s, cycle.end_s) == (pytest.approx(0.0), pytest.approx(PERIOD_S))
+    assert cycle.complete and (cycle.start_s, cycle.end_s) == (
+        pytest.approx(0.0),
+        pytest.approx(PERIOD_S),
+    )
     chosen = profiles.snapshot_indices(read.time_s, cycle, 8)
     times = read.time_s[chosen]
     assert len(chosen) == 8 and np.all(np.diff(times) > 0)
-    assert times[0] == pytest.approx(0.0) and times[-1] == pytest.approx(7 / 8 * PERIOD_S, abs=PUBLISH_DT_S)
+    assert times[0] == pytest.approx(0.0) and times[-1] == pytest.approx(
+        7 / 8 * PERIOD_S, abs=PUBLISH_DT_S
+    )
     assert np.allclose(np.diff(times), PERIOD_S / 8, atol=PUBLISH_DT_S)
     # the snapshots differ: the cable squeezes the mantle and lets it go within the cycle
-    radii = np.array([read.radius_m[i].max() - read.radius_m[i][len(read.radius_m[i]) // 2] for i in chosen])
+    radii = np.array(
+        [read.radius_m[i].max() - read.radius_m[i][len(read.radius_m[i]) // 2] for i in chosen]
+    )
     assert np.ptp(radii) > 1e-3
 
 
 def test_period_from_the_radius_signal_and_partial_cycle() -> None:
     time_s = np.arange(0.0, 3.0, 0.01)
-    radius_m = 0.02 + 0.001 * np.sin(2 * math.pi * 1.6 * time_s) + 0.0005 * time_s   # drifting
+    radius_m = 0.02 + 0.001 * np.sin(2 * math.pi * 1.6 * time_s) + 0.0005 * time_s  # drifting
     assert profiles.radius_period_s(time_s, radius_m) == pytest.approx(PERIOD_S, abs=0.01)
     assert profiles.radius_period_s(time_s, np.full_like(time_s, 0.02)) is None
     # without a known origin: the last period; shorter than a period: what there is, marked partial
@@ -80,7 +92,7 @@ def test_plot_has_the_snapshot_panel(shell_file: Path, tmp_path: Path) -> None:
     z_mm = np.concatenate([line.get_xdata() for line in lines])
     r_mm = np.concatenate([line.get_ydata() for line in lines])
     assert 155 < z_mm.max() < 175 and 20 < r_mm.max() < 23
-    assert len({line.get_color() for line in lines}) == 8          # one colour per phase
+    assert len({line.get_color() for line in lines}) == 8  # one colour per phase
     legend = [text.get_text() for text in ax.get_legend().get_texts()]
     assert legend[0].startswith('0.000 s') and len(legend) == 8
     # the PNG the CLI writes is the taller figure with the panel
@@ -102,30 +114,44 @@ def _frame(path: Path, k: int) -> np.ndarray:
         return np.asarray(image.convert('RGB'), dtype=int)
 
 
-def test_animate_writes_gif_frames(shell_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_animate_writes_gif_frames(
+    shell_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     gif = tmp_path / 'clip.gif'
-    assert cli.main(['animate', str(shell_file), '-o', str(gif), '--fps', '10', '--stride', '7']) == 0
+    assert (
+        cli.main(['animate', str(shell_file), '-o', str(gif), '--fps', '10', '--stride', '7']) == 0
+    )
     assert str(gif) in capsys.readouterr().out
     with Image.open(gif) as image:
         assert image.n_frames == math.ceil(71 / 7) and image.info['duration'] == 100
     # the mantle moves: frames differ below the title (the time in the title changes anyway)
-    first, squeezed = _frame(gif, 0), _frame(gif, 4)          # t = 0 and t = 0.28 s (most squeezed)
+    first, squeezed = _frame(gif, 0), _frame(gif, 4)  # t = 0 and t = 0.28 s (most squeezed)
     body = slice(first.shape[0] // 8, None)
     assert np.count_nonzero(np.any(first[body] != squeezed[body], axis=2)) > 500
-    # default stride: about real time at --fps (20 fps of 0.01 s profiles -> every 5th), in a window
+    # default stride: about real time at --fps (20 fps of 0.01 s profiles -> every 5th), in a
+    # window
     window = tmp_path / 'window.gif'
-    assert profiles.main_animate([str(shell_file), '-o', str(window), '--fps', '20',
-                                  '--start', '0.1', '--end', '0.5']) == 0
+    assert (
+        profiles.main_animate(
+            [str(shell_file), '-o', str(window), '--fps', '20', '--start', '0.1', '--end', '0.5']
+        )
+        == 0
+    )
     with Image.open(window) as image:
         assert image.n_frames == math.ceil(41 / 5) and image.info['duration'] == 50
 
 
-def test_animate_refuses_bad_input(shell_file: Path, lumped_file: Path, tmp_path: Path,
-                                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_animate_refuses_bad_input(
+    shell_file: Path, lumped_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     capsys.readouterr()
     assert profiles.main_animate([str(lumped_file)]) == 2
     err = capsys.readouterr().err
-    assert repr(str(lumped_file)) in err and 'lumped' in err and 'allowed: a shell-model recording' in err
+    assert (
+        repr(str(lumped_file)) in err
+        and 'lumped' in err
+        and 'allowed: a shell-model recording' in err
+    )
     bare = tmp_path / 'no_profiles.mcap'
     with BagWriter(bare) as bag:
         for topic, msg in messages.command_messages(Command()):

@@ -1,6 +1,7 @@
 """The README's harness example runs as written (real sim_node, real DDS)."""
-import re
+
 from pathlib import Path
+import re
 
 import pytest
 

@@ -1,40 +1,60 @@
-"""The recorder node as a real subprocess in an isolated DDS domain, fed by a publisher node here."""
+"""
+The recorder node as a real subprocess in an isolated DDS domain.
+
+It is fed by a publisher node here.
+"""
+
 from __future__ import annotations
 
 import os
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
+from pulsejet_sim import messages
+from pulsejet_sim.models.base import Command, Observation
+from pulsejet_sim.recorder import parse_topics, Recorder
 import pytest
 import rclpy
-import rclpy.executors
 from rclpy.duration import Duration
+import rclpy.executors
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rosbags.highlevel import AnyReader
-
-from pulsejet_sim import messages
-from pulsejet_sim.models.base import Command, Observation
-from pulsejet_sim.recorder import Recorder, parse_topics
 
 REPO = Path(__file__).resolve().parents[1]
 N_STEPS = 40
 
 
 def domain_id(offset: int) -> int:
-    """1..100, different per test run (pid) and per test (offset), so parallel runs do not cross-talk."""
+    """
+    Return a ROS domain id, 1..100, different per test run (pid) and per test (offset).
+
+    So parallel runs do not cross-talk.
+    """
     return 1 + (os.getpid() * 3 + offset) % 100
 
 
 def observation(i: int) -> Observation:
-    return Observation(time_s=0.02 * i, position_m=0.0, velocity_m_s=0.1 * i, acceleration_m_s2=0.0,
-                       mantle_radius_m=0.04 + 1e-3 * i, volume_m3=2e-4, fluid_mass_kg=0.2 + 0.01 * i,
-                       thrust_n=0.25 * i, added_mass_force_n=0.0, drag_n=0.0, jet_speed_m_s=0.0,
-                       cavity_pressure_pa=0.0, pump_flow_m3_s=0.0, valve_opening=1.0)
+    return Observation(
+        time_s=0.02 * i,
+        position_m=0.0,
+        velocity_m_s=0.1 * i,
+        acceleration_m_s2=0.0,
+        mantle_radius_m=0.04 + 1e-3 * i,
+        volume_m3=2e-4,
+        fluid_mass_kg=0.2 + 0.01 * i,
+        thrust_n=0.25 * i,
+        added_mass_force_n=0.0,
+        drag_n=0.0,
+        jet_speed_m_s=0.0,
+        cavity_pressure_pa=0.0,
+        pump_flow_m3_s=0.0,
+        valve_opening=1.0,
+    )
 
 
 class Publisher:
@@ -42,10 +62,14 @@ class Publisher:
 
     def __init__(self, domain: int, topics: list[str]) -> None:
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(
+            context=self.context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO
+        )
         self.node = Node('test_publisher', context=self.context)
         qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-        self.pubs = {t: self.node.create_publisher(messages.message_class(t), t, qos) for t in topics}
+        self.pubs = {
+            t: self.node.create_publisher(messages.message_class(t), t, qos) for t in topics
+        }
 
     def wait_matched(self, timeout_s: float = 15.0) -> None:
         deadline = time.monotonic() + timeout_s
@@ -56,14 +80,35 @@ class Publisher:
     def publish_run(self) -> None:
         for i in range(N_STEPS):
             obs = observation(i)
-            batch = messages.observation_messages(obs) + messages.command_messages(Command(1e-3, 0.25 * (i % 4), 0.0))
-            batch.append((messages.TOPIC_ENERGY_LEDGER, messages.ledger_message({'in_actuation_work': 0.5 * i}, obs.time_s)))
-            batch.append((messages.TOPIC_MANTLE_PROFILE,
-                          messages.profile_message([0.0, 0.01 * (1 + i)], [0.05, -0.05], obs.time_s)))
-            batch.append((messages.TOPIC_APPLIED_COMMAND,
-                          messages.applied_command_message(Command(1e-3, 0.25 * (i % 4), 0.0), obs.time_s)))
-            batch.append((messages.TOPIC_CMD_COMMAND,
-                          messages.command_message(Command(1e-3, 0.25 * (i % 4), 0.0), obs.time_s)))
+            batch = messages.observation_messages(obs) + messages.command_messages(
+                Command(1e-3, 0.25 * (i % 4), 0.0)
+            )
+            batch.append(
+                (
+                    messages.TOPIC_ENERGY_LEDGER,
+                    messages.ledger_message({'in_actuation_work': 0.5 * i}, obs.time_s),
+                )
+            )
+            batch.append(
+                (
+                    messages.TOPIC_MANTLE_PROFILE,
+                    messages.profile_message([0.0, 0.01 * (1 + i)], [0.05, -0.05], obs.time_s),
+                )
+            )
+            batch.append(
+                (
+                    messages.TOPIC_APPLIED_COMMAND,
+                    messages.applied_command_message(
+                        Command(1e-3, 0.25 * (i % 4), 0.0), obs.time_s
+                    ),
+                )
+            )
+            batch.append(
+                (
+                    messages.TOPIC_CMD_COMMAND,
+                    messages.command_message(Command(1e-3, 0.25 * (i % 4), 0.0), obs.time_s),
+                )
+            )
             for topic, msg in batch:
                 if topic in self.pubs:
                     self.pubs[topic].publish(msg)
@@ -76,13 +121,17 @@ class Publisher:
         rclpy.shutdown(context=self.context)
 
 
-def start_recorder(tmp_path: Path, domain: int, topics: list[str] | None = None) -> tuple[subprocess.Popen, Path]:
+def start_recorder(
+    tmp_path: Path, domain: int, topics: list[str] | None = None
+) -> tuple[subprocess.Popen, Path]:
     out = tmp_path / 'rec.mcap'
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     args = [sys.executable, '-m', 'pulsejet_sim.recorder', '--ros-args', '-p', f'output:={out}']
     if topics is not None:
         args += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in topics) + ']']
-    proc = subprocess.Popen(args, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        args, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     line = proc.stdout.readline()
     assert line.startswith('recorder: writing'), line + proc.stderr.read()
     return proc, out
@@ -102,14 +151,16 @@ def localhost_only(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 @pytest.mark.timeout(60)
-def test_recorder_process_records_all_topics_until_sigint(tmp_path: Path, localhost_only: None) -> None:
+def test_recorder_process_records_all_topics_until_sigint(
+    tmp_path: Path, localhost_only: None
+) -> None:
     domain = domain_id(0)
     proc, out = start_recorder(tmp_path, domain)
     pub = Publisher(domain, list(messages.TOPIC_TYPES))
     try:
         pub.wait_matched()
         pub.publish_run()
-        time.sleep(0.5)            # acked by DDS; give the recorder's executor time to take them
+        time.sleep(0.5)  # acked by DDS; give the recorder's executor time to take them
     finally:
         pub.close()
         proc.send_signal(signal.SIGINT)
@@ -119,15 +170,26 @@ def test_recorder_process_records_all_topics_until_sigint(tmp_path: Path, localh
     found = read_all(out)
     assert set(found) == {t if t.startswith('/') else '/' + t for t in messages.TOPIC_TYPES}
     assert {t: len(v) for t, v in found.items() if t != '/clock'} == {
-        t: N_STEPS for t in found if t != '/clock'}
-    assert len(found['/clock']) >= N_STEPS - 2            # best-effort subscription
-    assert [m.twist.linear.x for m in found['/pulsejet/velocity']] == [0.1 * i for i in range(N_STEPS)]
-    assert [m.wrench.force.x for m in found['/pulsejet/thrust']] == [0.25 * i for i in range(N_STEPS)]
-    stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in found['/pulsejet/velocity']]
+        t: N_STEPS for t in found if t != '/clock'
+    }
+    assert len(found['/clock']) >= N_STEPS - 2  # best-effort subscription
+    assert [m.twist.linear.x for m in found['/pulsejet/velocity']] == [
+        0.1 * i for i in range(N_STEPS)
+    ]
+    assert [m.wrench.force.x for m in found['/pulsejet/thrust']] == [
+        0.25 * i for i in range(N_STEPS)
+    ]
+    stamps = [
+        m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in found['/pulsejet/velocity']
+    ]
     assert stamps == pytest.approx([0.02 * i for i in range(N_STEPS)])
-    assert [m.data for m in found['/pulsejet/cmd/valve']] == [0.25 * (i % 4) for i in range(N_STEPS)]
+    assert [m.data for m in found['/pulsejet/cmd/valve']] == [
+        0.25 * (i % 4) for i in range(N_STEPS)
+    ]
     ledger = found['/pulsejet/energy_ledger'][-1].status[0]
-    assert ledger.values[0].key == 'in_actuation_work' and float(ledger.values[0].value) == 0.5 * (N_STEPS - 1)
+    assert ledger.values[0].key == 'in_actuation_work' and float(ledger.values[0].value) == 0.5 * (
+        N_STEPS - 1
+    )
 
 
 @pytest.mark.timeout(60)
@@ -154,12 +216,17 @@ def test_recorder_topic_subset_and_sigterm(tmp_path: Path, localhost_only: None)
         stdout, stderr = proc.communicate(timeout=15)
     assert proc.returncode == 0, stderr
     found = read_all(out)
-    assert {t: len(v) for t, v in found.items()} == {'/pulsejet/velocity': N_STEPS, '/pulsejet/volume': N_STEPS}
+    assert {t: len(v) for t, v in found.items()} == {
+        '/pulsejet/velocity': N_STEPS,
+        '/pulsejet/volume': N_STEPS,
+    }
 
 
 def test_parse_topics_names_bad_entry() -> None:
     assert parse_topics(['/pulsejet/velocity', 'x:std_msgs/msg/String']) == {
-        '/pulsejet/velocity': 'geometry_msgs/msg/TwistStamped', 'x': 'std_msgs/msg/String'}
+        '/pulsejet/velocity': 'geometry_msgs/msg/TwistStamped',
+        'x': 'std_msgs/msg/String',
+    }
     with pytest.raises(ValueError, match="'pulsejet/speed' is not a pulsejet topic"):
         parse_topics(['pulsejet/speed'])
 
@@ -168,21 +235,29 @@ def test_parse_topics_names_bad_entry() -> None:
 def test_recorder_class_in_process(tmp_path: Path, localhost_only: None) -> None:
     """The in-process Recorder (as demo.py may use it) with a publisher in the same context."""
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id(2), signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(
+        context=context, domain_id=domain_id(2), signal_handler_options=SignalHandlerOptions.NO
+    )
     try:
         node = Node('recorder_in_process', context=context)
         recorder = Recorder(node, tmp_path / 'in.mcap', ['pulsejet/thrust'])
-        pub = node.create_publisher(messages.message_class('pulsejet/thrust'), 'pulsejet/thrust', 10)
+        pub = node.create_publisher(
+            messages.message_class('pulsejet/thrust'), 'pulsejet/thrust', 10
+        )
         executor = rclpy.executors.SingleThreadedExecutor(context=context)
         executor.add_node(node)
         for i in range(5):
             pub.publish(messages.observation_messages(observation(i))[3][1])
         deadline = time.monotonic() + 10
-        while recorder.message_counts.get('/pulsejet/thrust', 0) < 5 and time.monotonic() < deadline:
+        while (
+            recorder.message_counts.get('/pulsejet/thrust', 0) < 5 and time.monotonic() < deadline
+        ):
             executor.spin_once(timeout_sec=0.05)
         path = recorder.close()
         recorder.close()
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
-    assert [m.wrench.force.x for m in read_all(path)['/pulsejet/thrust']] == [0.25 * i for i in range(5)]
+    assert [m.wrench.force.x for m in read_all(path)['/pulsejet/thrust']] == [
+        0.25 * i for i in range(5)
+    ]

@@ -1,29 +1,32 @@
-"""The replay node as a real subprocess in an isolated DDS domain, listened to from this process;
-plus the schedule and parameter checks without DDS."""
+"""
+The replay node as a real subprocess in an isolated DDS domain.
+
+Listened to from this process; plus the schedule and parameter checks without DDS.
+"""
+
 from __future__ import annotations
 
 import os
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
+from geometry_msgs.msg import TwistStamped
 import numpy as np
+from pulsejet_sim.bag import BagInfo, BagWriter, iter_bag
+from pulsejet_sim.replay import build_schedule, check_config, ConfigError, load_recording
+from pulsejet_sim.runner import run_scene
+from pulsejet_sim.scene import load_scene
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from geometry_msgs.msg import TwistStamped
 from rosgraph_msgs.msg import Clock
-
-from pulsejet_sim.bag import BagInfo, BagWriter, iter_bag
-from pulsejet_sim.replay import ConfigError, build_schedule, check_config, load_recording
-from pulsejet_sim.runner import run_scene
-from pulsejet_sim.scene import load_scene
 
 REPO = Path(__file__).resolve().parents[1]
 RATE = 2.0
@@ -47,7 +50,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope='module')
 def recording_without_clock(recording: Path) -> Path:
-    """The same recording minus /clock (the replay must then generate its own clock)."""
+    """Return the same recording minus /clock (the replay must then generate its own clock)."""
     out = recording.with_name('escape_noclock.mcap')
     info = BagInfo(recording)
     msgs = [m for m in iter_bag(recording, info=info, decode=False) if m.topic != '/clock']
@@ -65,19 +68,30 @@ class Listener:
 
     def __init__(self, domain: int) -> None:
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(
+            context=self.context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO
+        )
         self.node = Node('replay_listener', context=self.context)
         self.velocity: list[tuple[float, TwistStamped]] = []
         self.clock: list[tuple[float, float]] = []
         self.clock_best_effort: list[float] = []
         reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         best_effort = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.node.create_subscription(TwistStamped, '/pulsejet/velocity',
-                                      lambda m: self.velocity.append((time.monotonic(), m)), reliable)
-        self.node.create_subscription(Clock, '/clock',
-                                      lambda m: self.clock.append((time.monotonic(), stamp_s(m.clock))), reliable)
-        self.node.create_subscription(Clock, '/clock',
-                                      lambda m: self.clock_best_effort.append(stamp_s(m.clock)), best_effort)
+        self.node.create_subscription(
+            TwistStamped,
+            '/pulsejet/velocity',
+            lambda m: self.velocity.append((time.monotonic(), m)),
+            reliable,
+        )
+        self.node.create_subscription(
+            Clock,
+            '/clock',
+            lambda m: self.clock.append((time.monotonic(), stamp_s(m.clock))),
+            reliable,
+        )
+        self.node.create_subscription(
+            Clock, '/clock', lambda m: self.clock_best_effort.append(stamp_s(m.clock)), best_effort
+        )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.spinning = threading.Event()
@@ -104,7 +118,9 @@ def start_replay(domain: int, *params: str) -> subprocess.Popen:
     args = [sys.executable, '-m', 'pulsejet_sim.replay', '--ros-args']
     for p in params:
         args += ['-p', p]
-    return subprocess.Popen(args, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        args, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
 
 
 def recorded_velocity(path: Path) -> tuple[list[float], list[float]]:
@@ -117,10 +133,15 @@ def test_replay_publishes_recording_with_its_timing_and_clock(recording: Path) -
     domain = domain_id(0)
     listener = Listener(domain)
     try:
-        proc = start_replay(domain, f'bag:={recording}', f'rate:={RATE}',
-                            "wait_for_topics:=['pulsejet/velocity', '/clock']", 'delay_s:=0.2')
+        proc = start_replay(
+            domain,
+            f'bag:={recording}',
+            f'rate:={RATE}',
+            "wait_for_topics:=['pulsejet/velocity', '/clock']",
+            'delay_s:=0.2',
+        )
         stdout, stderr = proc.communicate(timeout=40)
-        time.sleep(0.2)   # acked before the replay exited; let the executor run the last callbacks
+        time.sleep(0.2)  # acked before the replay exited; let the executor run the last callbacks
     finally:
         listener.close()
     assert proc.returncode == 0, stderr
@@ -141,10 +162,13 @@ def test_replay_publishes_recording_with_its_timing_and_clock(recording: Path) -
     assert np.corrcoef(arrival, expected)[0, 1] > 0.995
     deviation = arrival - expected
     deviation -= np.median(deviation)
-    assert np.max(np.abs(deviation)) < 0.08, f'max timing deviation {np.max(np.abs(deviation)):.3f} s'
-    assert np.percentile(np.abs(deviation), 90) < 0.02      # typically < 1 ms
+    assert (
+        np.max(np.abs(deviation)) < 0.08
+    ), f'max timing deviation {np.max(np.abs(deviation)):.3f} s'
+    assert np.percentile(np.abs(deviation), 90) < 0.02  # typically < 1 ms
 
-    # /clock: the recorded clock, in order, to the recorded end, for reliable and best-effort subscribers
+    # /clock: the recorded clock, in order, to the recorded end, for reliable and best-effort
+    # subscribers
     recorded_clock = [stamp_s(m.msg.clock) for m in iter_bag(recording, topics=['/clock'])]
     clock = [c for _, c in listener.clock]
     assert clock == recorded_clock
@@ -154,15 +178,28 @@ def test_replay_publishes_recording_with_its_timing_and_clock(recording: Path) -
 
 
 @pytest.mark.timeout(60)
-def test_replay_generated_clock_topic_filter_offset_loop_and_sigint(recording_without_clock: Path) -> None:
-    """No /clock in the file: the replay makes one from the log times; topics filter; start offset;
-    looping restarts (the clock jumps back); SIGINT ends it cleanly."""
+def test_replay_generated_clock_topic_filter_offset_loop_and_sigint(
+    recording_without_clock: Path,
+) -> None:
+    """
+    With no /clock in the file the replay makes one; filter, offset, loop, SIGINT.
+
+    No /clock in the file: the replay makes one from the log times; topics filter; start offset;
+    looping restarts (the clock jumps back); SIGINT ends it cleanly.
+    """
     domain = domain_id(1)
     listener = Listener(domain)
     try:
-        proc = start_replay(domain, f'bag:={recording_without_clock}', 'rate:=2', 'start_offset_s:=0.5',
-                            "topics:=['pulsejet/velocity']", 'loop:=true',
-                            "wait_for_topics:=['/pulsejet/velocity', '/clock']", 'delay_s:=0.2')
+        proc = start_replay(
+            domain,
+            f'bag:={recording_without_clock}',
+            'rate:=2',
+            'start_offset_s:=0.5',
+            "topics:=['pulsejet/velocity']",
+            'loop:=true',
+            "wait_for_topics:=['/pulsejet/velocity', '/clock']",
+            'delay_s:=0.2',
+        )
         deadline = time.monotonic() + 30
         # wait for the second pass: the clock jumps back
         while not any(b < a for (_, a), (_, b) in zip(listener.clock, listener.clock[1:])):
@@ -181,7 +218,7 @@ def test_replay_generated_clock_topic_filter_offset_loop_and_sigint(recording_wi
     stamps, values = recorded_velocity(recording_without_clock)
     first_pass = [(s, v) for s, v in zip(stamps, values) if s >= 0.5 - 1e-9]
     got = [(stamp_s(m.header.stamp), m.twist.linear.x) for _, m in listener.velocity]
-    assert got[:len(first_pass)] == first_pass
+    assert got[: len(first_pass)] == first_pass
     clock = [c for _, c in listener.clock]
     jump = next(i for i in range(1, len(clock)) if clock[i] < clock[i - 1])
     one_pass = clock[:jump]
@@ -193,16 +230,26 @@ def test_replay_generated_clock_topic_filter_offset_loop_and_sigint(recording_wi
 
 
 @pytest.mark.timeout(30)
-@pytest.mark.parametrize('param, value, shown', [
-    ('rate', '-1', 'rate=-1'), ('rate', '.nan', 'rate=nan'), ('rate', '0.0', 'rate=0.0'),
-    ('start_offset_s', '7.5', 'start_offset_s=7.5')])
-def test_replay_bad_parameter_exits_2_naming_the_value(recording: Path, param: str, value: str, shown: str) -> None:
+@pytest.mark.parametrize(
+    'param, value, shown',
+    [
+        ('rate', '-1', 'rate=-1'),
+        ('rate', '.nan', 'rate=nan'),
+        ('rate', '0.0', 'rate=0.0'),
+        ('start_offset_s', '7.5', 'start_offset_s=7.5'),
+    ],
+)
+def test_replay_bad_parameter_exits_2_naming_the_value(
+    recording: Path, param: str, value: str, shown: str
+) -> None:
     proc = start_replay(domain_id(2), f'bag:={recording}', f'{param}:={value}')
     stdout, stderr = proc.communicate(timeout=20)
     assert proc.returncode == 2, stdout + stderr
     lines = [line for line in stderr.splitlines() if line.strip()]
     assert len(lines) == 1, stderr
-    assert lines[0].startswith('replay: error:') and shown in lines[0] and 'allowed' in lines[0], lines[0]
+    assert (
+        lines[0].startswith('replay: error:') and shown in lines[0] and 'allowed' in lines[0]
+    ), lines[0]
     assert stdout == ''
 
 
@@ -216,27 +263,45 @@ def test_replay_bad_files_exit_2(tmp_path: Path) -> None:
         assert proc.returncode == 2 and str(bag) in stderr and 'expected an MCAP' in stderr, stderr
 
 
-# ---- no DDS ---------------------------------------------------------------------------------------
-def test_schedule_offsets_filter_and_generated_clock(recording: Path, recording_without_clock: Path) -> None:
+# ---- no DDS -------------------------------------------------------------------------------------
+def test_schedule_offsets_filter_and_generated_clock(
+    recording: Path, recording_without_clock: Path
+) -> None:
     rec = load_recording(recording)
     sched = build_schedule(rec, check_config({'bag': str(recording)}))
     commands = [m for m in rec.messages if '/cmd/' in m[1]]
-    assert commands and not any('/cmd/' in e.topic for e in sched.events)     # not replayed by default
+    assert commands and not any(
+        '/cmd/' in e.topic for e in sched.events
+    )  # not replayed by default
     assert len(sched.events) == len(rec.messages) - len(commands) and not sched.generated_clock
-    with_commands = build_schedule(rec, check_config({'bag': str(recording), 'replay_commands': True}))
+    with_commands = build_schedule(
+        rec, check_config({'bag': str(recording), 'replay_commands': True})
+    )
     assert len(with_commands.events) == len(rec.messages)
     offsets = [e.offset_ns for e in sched.events]
     assert offsets == sorted(offsets) and offsets[0] == 0 and offsets[-1] == 1_000_000_000
     assert sched.wall_duration_s(2.0) == pytest.approx(0.5)
 
-    cfg = check_config({'bag': str(recording), 'topics': ['pulsejet/velocity'], 'publish_clock': False,
-                        'start_offset_s': 0.25})
+    cfg = check_config(
+        {
+            'bag': str(recording),
+            'topics': ['pulsejet/velocity'],
+            'publish_clock': False,
+            'start_offset_s': 0.25,
+        }
+    )
     sched = build_schedule(rec, cfg)
     assert {e.topic for e in sched.events} == {'/pulsejet/velocity'}
-    assert len(sched.events) == 76 and sched.events[0].offset_ns == 0 and sched.duration_ns == 750_000_000
+    assert (
+        len(sched.events) == 76
+        and sched.events[0].offset_ns == 0
+        and sched.duration_ns == 750_000_000
+    )
 
     rec = load_recording(recording_without_clock)
-    sched = build_schedule(rec, check_config({'bag': str(recording_without_clock), 'rate': 4, 'clock_rate_hz': 50}))
+    sched = build_schedule(
+        rec, check_config({'bag': str(recording_without_clock), 'rate': 4, 'clock_rate_hz': 50})
+    )
     ticks = [e for e in sched.events if e.topic == '/clock']
     assert sched.generated_clock and all(e.payload is None for e in ticks)
     # 50 Hz of wall time at rate 4: every 80 ms of recorded time; 0 .. 0.96 s, then the end, 1.0 s
@@ -246,12 +311,20 @@ def test_schedule_offsets_filter_and_generated_clock(recording: Path, recording_
     assert sched.events[0].topic == '/clock' and first_velocity > 0
 
 
-@pytest.mark.parametrize('values, shown', [
-    ({}, 'bag='), ({'bag': 'x.mcap', 'rate': -1}, 'rate=-1'), ({'bag': 'x.mcap', 'rate': float('nan')}, 'rate=nan'),
-    ({'bag': 'x.mcap', 'rate': 'fast'}, "rate='fast'"), ({'bag': 'x.mcap', 'loop': 2}, 'loop=2'),
-    ({'bag': 'x.mcap', 'start_offset_s': -0.1}, 'start_offset_s=-0.1'),
-    ({'bag': 'x.mcap', 'clock_rate_hz': 0}, 'clock_rate_hz=0'), ({'bag': 'x.mcap', 'rte': 2}, "'rte'"),
-    ({'bag': 'x.mcap', 'topics': [3]}, 'topics=[3]')])
+@pytest.mark.parametrize(
+    'values, shown',
+    [
+        ({}, 'bag='),
+        ({'bag': 'x.mcap', 'rate': -1}, 'rate=-1'),
+        ({'bag': 'x.mcap', 'rate': float('nan')}, 'rate=nan'),
+        ({'bag': 'x.mcap', 'rate': 'fast'}, "rate='fast'"),
+        ({'bag': 'x.mcap', 'loop': 2}, 'loop=2'),
+        ({'bag': 'x.mcap', 'start_offset_s': -0.1}, 'start_offset_s=-0.1'),
+        ({'bag': 'x.mcap', 'clock_rate_hz': 0}, 'clock_rate_hz=0'),
+        ({'bag': 'x.mcap', 'rte': 2}, "'rte'"),
+        ({'bag': 'x.mcap', 'topics': [3]}, 'topics=[3]'),
+    ],
+)
 def test_check_config_names_bad_values(values: dict, shown: str) -> None:
     with pytest.raises(ConfigError) as err:
         check_config(values)

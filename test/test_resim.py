@@ -1,20 +1,28 @@
-"""Re-simulation of recordings from their applied commands: bit-identical for `pulsejet run` files,
-and a perturbed command is detected."""
+"""
+Re-simulation of recordings from their applied commands.
+
+Bit-identical for `pulsejet run` files, and a perturbed command is detected.
+"""
+
 from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
 from typing import Callable
 
+from pulsejet_sim.bag import BagInfo, BagWriter, iter_bag
+from pulsejet_sim.resim import (
+    main_resim,
+    read_applied_commands,
+    read_recorded_states,
+    ResimError,
+    resimulate,
+)
+from pulsejet_sim.runner import run_scene
+from pulsejet_sim.scene import load_scene
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
-
-from pulsejet_sim.bag import BagInfo, BagWriter, iter_bag
-from pulsejet_sim.resim import (ResimError, main_resim, read_applied_commands, read_recorded_states,
-                                resimulate)
-from pulsejet_sim.runner import run_scene
-from pulsejet_sim.scene import load_scene
 
 DURATION_S = 5.0
 TOPICS = ('pulsejet/velocity', 'pulsejet/volume', 'pulsejet/mantle_radius')
@@ -28,9 +36,17 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def rewrite(src: Path, dst: Path, transform: Callable[[str, int, bytes], tuple[int, bytes]],
-            metadata: dict[str, str] | None = None) -> Path:
-    """Copy a recording message by message through transform(topic, log_ns, cdr) -> (log_ns, cdr)."""
+def rewrite(
+    src: Path,
+    dst: Path,
+    transform: Callable[[str, int, bytes], tuple[int, bytes]],
+    metadata: dict[str, str] | None = None,
+) -> Path:
+    """
+    Copy a recording message by message through transform.
+
+    transform(topic, log_ns, cdr) -> (log_ns, cdr).
+    """
     info = BagInfo(src)
     msgs = list(iter_bag(src, info=info, decode=False))
     with BagWriter(dst) as bag:
@@ -54,7 +70,7 @@ def test_runner_recording_resimulates_bit_identically(recording: Path) -> None:
     assert result.max_error == 0.0 and result.bit_identical and result.fault is None
     assert result.time_source == 'log time'
     assert result.steps == int(round(DURATION_S / result.dt_s))
-    assert len(result.commands) >= 3     # inflate, hold, jet within 5 s: the commands do change
+    assert len(result.commands) >= 3  # inflate, hold, jet within 5 s: the commands do change
     assert not result.warnings
     # a Scene object works the same
     assert resimulate(recording, load_scene('pump_cycle')).bit_identical
@@ -63,11 +79,16 @@ def test_runner_recording_resimulates_bit_identically(recording: Path) -> None:
 def test_perturbed_command_list_is_detected(recording: Path) -> None:
     commands = read_applied_commands(recording)
     assert commands[0][0] == 0.0
-    i = 1   # the second command (hold or jet)
+    i = 1  # the second command (hold or jet)
     t, cmd = commands[i]
     perturbed = list(commands)
-    perturbed[i] = (t, dataclasses.replace(cmd, valve_opening=min(1.0, cmd.valve_opening + 0.05)
-                                           if cmd.valve_opening < 1.0 else 0.95))
+    perturbed[i] = (
+        t,
+        dataclasses.replace(
+            cmd,
+            valve_opening=min(1.0, cmd.valve_opening + 0.05) if cmd.valve_opening < 1.0 else 0.95,
+        ),
+    )
     result = resimulate(recording, 'pump_cycle', commands=perturbed)
     assert result.max_error > 0.0 and not result.bit_identical
     assert result.topics['pulsejet/velocity'].max_abs_error > 0.0
@@ -78,8 +99,9 @@ def test_perturbed_command_list_is_detected(recording: Path) -> None:
     assert resimulate(recording, 'pump_cycle', commands=shifted).max_error > 0.0
 
 
-def test_perturbed_bag_is_detected_and_cli_exit_codes(recording: Path, tmp_path: Path,
-                                                      capsys: pytest.CaptureFixture) -> None:
+def test_perturbed_bag_is_detected_and_cli_exit_codes(
+    recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     seen = []
 
     def bump_first_pump_flow(topic: str, log_ns: int, cdr: bytes) -> tuple[int, bytes]:
@@ -89,6 +111,7 @@ def test_perturbed_bag_is_detected_and_cli_exit_codes(recording: Path, tmp_path:
             seen.append(msg)
             cdr = serialize_message(msg)
         return log_ns, cdr
+
     modified = rewrite(recording, tmp_path / 'modified.mcap', bump_first_pump_flow)
     assert seen and seen[0].position[0] > 0.0
 
@@ -102,10 +125,10 @@ def test_perturbed_bag_is_detected_and_cli_exit_codes(recording: Path, tmp_path:
     assert 'MISMATCH' in capsys.readouterr().out
     big = result.max_error * 2
     assert main_resim([str(modified), '--scene', 'pump_cycle', '--tolerance', repr(big)]) == 0
-    assert main_resim([str(recording)]) == 0                        # the runner stored its scene
+    assert main_resim([str(recording)]) == 0  # the runner stored its scene
     capsys.readouterr()
     anonymous = rewrite(recording, tmp_path / 'anonymous.mcap', lambda topic, ns, cdr: (ns, cdr))
-    assert main_resim([str(anonymous)]) == 2                        # this copy does not name its scene
+    assert main_resim([str(anonymous)]) == 2  # this copy does not name its scene
     assert 'does not name its scene' in capsys.readouterr().err
     assert main_resim([str(tmp_path / 'missing.mcap'), '--scene', 'pump_cycle']) == 2
     assert main_resim([str(recording), '--scene', 'no_such_scene']) == 2
@@ -121,16 +144,28 @@ def test_perturbed_bag_is_detected_and_cli_exit_codes(recording: Path, tmp_path:
     assert resimulate(out_path, 'pump_cycle').bit_identical
 
 
-def test_live_style_recording_with_receive_times_and_stored_scene(recording: Path, tmp_path: Path) -> None:
-    """Log times = wall-clock receive times (as the recorder writes them, with jitter): Float64 states
-    are placed through /clock, and the scene named in the file's metadata is used."""
+def test_live_style_recording_with_receive_times_and_stored_scene(
+    recording: Path, tmp_path: Path
+) -> None:
+    """
+    A live-style recording: states placed through /clock, the stored scene used.
+
+    Log times = wall-clock receive times (as the recorder writes them, with jitter): Float64 states
+    are placed through /clock, and the scene named in the file's metadata is used.
+    """
     epoch_ns = 1_764_000_000_000_000_000
     counter = [0]
 
     def receive_time(topic: str, log_ns: int, cdr: bytes) -> tuple[int, bytes]:
         counter[0] += 1
-        return epoch_ns + log_ns + 200_000 + (counter[0] * 7919) % 3_000_000, cdr   # 0.2 .. 3.2 ms late
-    live = rewrite(recording, tmp_path / 'live.mcap', receive_time, metadata={'scene': 'pump_cycle'})
+        return (
+            epoch_ns + log_ns + 200_000 + (counter[0] * 7919) % 3_000_000,
+            cdr,
+        )  # 0.2 .. 3.2 ms late
+
+    live = rewrite(
+        recording, tmp_path / 'live.mcap', receive_time, metadata={'scene': 'pump_cycle'}
+    )
     result = resimulate(live)
     assert result.scene_name == 'pump_cycle'
     assert result.time_source == 'clock-mapped'
@@ -139,7 +174,11 @@ def test_live_style_recording_with_receive_times_and_stored_scene(recording: Pat
 
 def test_missing_applied_commands_is_an_error(recording: Path, tmp_path: Path) -> None:
     info = BagInfo(recording)
-    msgs = [m for m in iter_bag(recording, info=info, decode=False) if m.topic != '/pulsejet/applied_command']
+    msgs = [
+        m
+        for m in iter_bag(recording, info=info, decode=False)
+        if m.topic != '/pulsejet/applied_command'
+    ]
     stripped = tmp_path / 'no_commands.mcap'
     with BagWriter(stripped) as bag:
         for topic, type_name in info.topics.items():

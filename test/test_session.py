@@ -1,20 +1,27 @@
-"""The ROS-free live engine (pulsejet_sim.engine.session) with a fake wall clock: pacing on the
-physics step's grid, visible dropped time, watchdog in simulated and wall time, closed-loop
-lockstep, duration, faults, health. No DDS."""
-import math
+"""
+The ROS-free live engine (pulsejet_sim.engine.session) with a fake wall clock.
 
-import pytest
+Pacing on the physics step's grid, visible dropped time, watchdog in simulated and wall time,
+closed-loop lockstep, duration, faults, health. No DDS.
+"""
+
+import math
 
 from pulsejet_sim.engine import session as eng
 from pulsejet_sim.models.base import CommandError
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.simulation import Simulation
+import pytest
 
 
 def make(pacing='real_time', scene='pump_cycle', command_driven=False, **config):
     sim = Simulation(load_scene(scene, command_driven=command_driven).model)
-    return eng.Session(sim, eng.SessionConfig(pacing=pacing, publish_rate_hz=100.0, **config), now=0.0,
-                       physics_clock=lambda: 0.0)
+    return eng.Session(
+        sim,
+        eng.SessionConfig(pacing=pacing, publish_rate_hz=100.0, **config),
+        now=0.0,
+        physics_clock=lambda: 0.0,
+    )
 
 
 def published(events):
@@ -26,10 +33,12 @@ def test_real_time_states_lie_on_the_step_grid_one_period_apart():
     s.start(0.0)
     times = []
     for k in range(1, 51):
-        times += [o.time_s for o in published(s.tick(k * 0.01 + 0.003 * (k % 3)))]   # jittery ticks
+        times += [o.time_s for o in published(s.tick(k * 0.01 + 0.003 * (k % 3)))]  # jittery ticks
     steps = [round(t / s.dt_s) for t in times]
     assert all(abs(t - n * s.dt_s) < 1e-12 for t, n in zip(times, steps))
-    assert all(b - a == s.publish_every for a, b in zip(steps, steps[1:]))     # every period, none skipped
+    assert all(
+        b - a == s.publish_every for a, b in zip(steps, steps[1:])
+    )  # every period, none skipped
     assert times[-1] == pytest.approx(0.5, abs=0.011)
 
 
@@ -37,7 +46,7 @@ def test_a_late_tick_drops_wall_time_visibly_instead_of_silently():
     s = make()
     s.start(0.0)
     s.tick(0.01)
-    events = s.tick(1.0)                     # the node was not scheduled for ~1 s
+    events = s.tick(1.0)  # the node was not scheduled for ~1 s
     assert len(published(events)) == eng.MAX_CATCH_UP_PERIODS
     assert s.dropped_s() == pytest.approx(1.0 - 0.01 - eng.MAX_CATCH_UP_PERIODS * 0.01, abs=0.011)
     warnings = [e.text for e in events if isinstance(e, eng.Log) and e.level == 'warning']
@@ -55,7 +64,10 @@ def test_closed_loop_waits_for_each_answer_and_is_deterministic():
             # however late the controller answers (wall time), nothing moves without it
             assert published(s.tick(10.0 * k + delay)) == [] or s.awaiting_command
             t = states[-1].time_s
-            cmd = {'pump_flow_m3_s': 2e-3 if t < 0.5 else 0.0, 'valve_opening': 0.0 if t < 0.8 else 1.0}
+            cmd = {
+                'pump_flow_m3_s': 2e-3 if t < 0.5 else 0.0,
+                'valve_opening': 0.0 if t < 0.8 else 1.0,
+            }
             states += published(s.accept(cmd, 10.0 * k + delay, stamp_s=t))
             answered.append(t)
         return [(o.time_s, o.volume_m3, o.velocity_m_s) for o in states], answered
@@ -63,7 +75,9 @@ def test_closed_loop_waits_for_each_answer_and_is_deterministic():
     fast, t_fast = run([0.001] * 30)
     slow, t_slow = run([0.9, 0.0, 3.0] * 10)
     assert fast == slow and t_fast == t_slow
-    assert [round(t / 0.05) for t, _, _ in fast] == list(range(31))        # one control period per answer
+    assert [round(t / 0.05) for t, _, _ in fast] == list(
+        range(31)
+    )  # one control period per answer
 
 
 def test_closed_loop_ignores_a_stale_answer():
@@ -71,7 +85,7 @@ def test_closed_loop_ignores_a_stale_answer():
     s.start(0.0)
     s.accept({'valve_opening': 1.0}, 0.1, stamp_s=0.0)
     assert s.sim.time_s == pytest.approx(0.05)
-    s.accept({'valve_opening': 1.0}, 0.2, stamp_s=0.0)        # answers t=0, not the awaited t=0.05
+    s.accept({'valve_opening': 1.0}, 0.2, stamp_s=0.0)  # answers t=0, not the awaited t=0.05
     assert s.sim.time_s == pytest.approx(0.05)
     s.accept({'valve_opening': 1.0}, 0.3, stamp_s=0.05)
     assert s.sim.time_s == pytest.approx(0.10)
@@ -82,7 +96,7 @@ def test_atomic_command_applies_all_or_nothing():
     s.start(0.0)
     with pytest.raises(CommandError, match='valve_opening'):
         s.accept({'pump_flow_m3_s': 1e-3, 'valve_opening': math.nan}, 0.0)
-    assert s.command == s.sim.command                     # nothing applied
+    assert s.command == s.sim.command  # nothing applied
     with pytest.raises(CommandError, match="'thrust'.*allowed"):
         s.accept({'thrust': 1.0}, 0.0)
     s.accept({'pump_flow_m3_s': 1e-3, 'valve_opening': 0.0}, 0.0)
@@ -101,7 +115,7 @@ def test_watchdog_applies_the_safe_command_in_its_clock(clock):
         applied = [e for e in s.tick(0.3) if isinstance(e, eng.Applied)]
         assert s.sim.time_s > 0.2
     else:
-        s.config.pacing = 'lockstep'       # simulated time stands still, wall time goes on
+        s.config.pacing = 'lockstep'  # simulated time stands still, wall time goes on
         assert not any(isinstance(e, eng.Log) for e in s.tick(0.1))
         events = s.tick(0.25)
         assert s.watchdog_tripped and s.command == eng.SAFE_COMMAND and s.sim.time_s == 0.0
@@ -125,7 +139,7 @@ def test_duration_ends_the_session_with_the_ledger():
 def test_a_blow_up_halts_without_publishing_nan_and_reset_recovers():
     s = make('lockstep', scene='escape', step_count=1000)
     s.start(0.0)
-    s.sim.state[:] = math.nan            # a broken state: the next step must fail cleanly
+    s.sim.state[:] = math.nan  # a broken state: the next step must fail cleanly
     ok, message, events = s.step(0.0)
     assert not ok and 'blew up' in message and s.run_state() == 'fault'
     assert any(isinstance(e, eng.Halted) for e in events)
@@ -137,7 +151,7 @@ def test_a_blow_up_halts_without_publishing_nan_and_reset_recovers():
 
 
 def test_idle_scene_closure_is_judged_against_the_energy_in_play():
-    s = make('real_time', scene='shell_robot', command_driven=True)   # no cable command: idle
+    s = make('real_time', scene='shell_robot', command_driven=True)  # no cable command: idle
     s.start(0.0)
     s.tick(0.05)
     level, message, values = s.health(0.05)
@@ -150,7 +164,9 @@ def test_closed_loop_does_not_apply_a_stale_answer():
     s.start(0.0)
     s.accept({'pump_flow_m3_s': 1e-3, 'valve_opening': 0.0}, 0.1, stamp_s=0.0)
     held = s.command
-    s.accept({'pump_flow_m3_s': 4e-3, 'valve_opening': 1.0}, 0.2, stamp_s=0.0)   # the t=0 state answered again
+    s.accept(
+        {'pump_flow_m3_s': 4e-3, 'valve_opening': 1.0}, 0.2, stamp_s=0.0
+    )  # the t=0 state answered again
     assert s.command == held
 
 
@@ -175,6 +191,7 @@ def test_outbox_sends_each_batch_at_its_time_in_order_and_flush_sends_the_rest_n
     import time
 
     from pulsejet_sim.engine.outbox import TimedOutbox
+
     sent = []
     box = TimedOutbox()
     box.start()
@@ -186,7 +203,9 @@ def test_outbox_sends_each_batch_at_its_time_in_order_and_flush_sends_the_rest_n
     while len(sent) < 5 and time.monotonic() < deadline:
         time.sleep(0.01)
     assert [k for k, _ in sent] == [0, 1, 2, 3, 4]
-    assert all(when >= t0 + 0.05 * (k + 1) for k, when in sent)     # never early (late only under load)
+    assert all(
+        when >= t0 + 0.05 * (k + 1) for k, when in sent
+    )  # never early (late only under load)
     assert box.pending() == 1
     box.flush()
     assert [k for k, _ in sent][-1] == 'late' and box.pending() == 0

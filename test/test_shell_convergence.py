@@ -1,13 +1,17 @@
-"""Shell model: measured convergence order in the time step (the mesh order is in test_shell_static)."""
+"""
+Shell model: measured convergence order in the time step.
+
+The mesh order is in test_shell_static.
+"""
+
 import copy
 import pathlib
 
 import numpy as np
-import pytest
-import yaml
-
 from pulsejet_sim.models.base import Command
 from pulsejet_sim.models.shell import ShellModel
+import pytest
+import yaml
 
 CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
 BASE = yaml.safe_load((CONFIG / 'shell_robot.yaml').read_text())
@@ -15,7 +19,11 @@ BASE['mesh']['elements'] = 12
 
 
 def run(dt, integrator, duration=0.3):
-    """Robot scene (full physics: cable, viscosity, jet, drag, vehicle) through the first contraction."""
+    """
+    Run the robot scene (full physics) through the first contraction.
+
+    Full physics: cable, viscosity, jet, drag, vehicle.
+    """
     scene = copy.deepcopy(BASE)
     scene['simulation'].update(dt_s=dt, integrator=integrator)
     model = ShellModel.from_scene(scene)
@@ -26,7 +34,9 @@ def run(dt, integrator, duration=0.3):
     return np.array([obs.velocity_m_s, obs.volume_m3, r[6]])
 
 
-@pytest.mark.parametrize('integrator, low, high', [('implicit_midpoint', 1.8, 2.4), ('backward_euler', 0.85, 1.4)])
+@pytest.mark.parametrize(
+    'integrator, low, high', [('implicit_midpoint', 1.8, 2.4), ('backward_euler', 0.85, 1.4)]
+)
 def test_time_step_order(integrator, low, high):
     ref = run(1.25e-4, integrator)
     errs = [np.abs(run(dt, integrator) - ref) / np.abs(ref) for dt in (4e-3, 2e-3, 1e-3)]
@@ -34,7 +44,7 @@ def test_time_step_order(integrator, low, high):
     # measured: midpoint 2.0-2.1 (speed, volume, radius); backward Euler 1.04-1.10
     assert np.all(orders > low) and np.all(orders < high), orders
     if integrator == 'implicit_midpoint':
-        assert errs[1].max() < 1e-4      # 2 ms steps are accurate to 1e-4 relative
+        assert errs[1].max() < 1e-4  # 2 ms steps are accurate to 1e-4 relative
 
 
 def test_default_robot_step_is_accurate_against_a_fine_step():

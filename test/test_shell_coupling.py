@@ -174,3 +174,32 @@ def test_fixed_nozzle_with_a_free_edge_keeps_the_exit_area():
     edge = ShellModel.from_scene(cone_scene('paper'))
     # in the paper coupling no cavity pressure acts on the wall, so the exit area does not change the shell
     assert np.array_equal(model.profile(state)[0], edge.profile(run(edge, 0.15))[0])
+
+
+def test_paper_code_clamps_the_pole_and_frees_the_edge():
+    """Experiment E, `coupling: paper_code` (the authors' code, docs/PHYSICS_SHELL.md "Experiment E"):
+    the body holds the pole (sigmas_o = zeros(6,1) at X = 0), the open edge carries no wrench and moves
+    in r, z and theta; thrust, refill force and drag ride on the wall and reach the vehicle through
+    the pole; the ledger names what the scheme creates and closes."""
+    jet = dict(outlet='free_edge_fixed_nozzle', outlet_radius_m=0.0125, thrust_coefficient=1.0)
+    model = ShellModel.from_scene(cone_scene('paper_code', jet=jet))
+    nd = model.Nd
+    assert nd[0, sk.N_FIXR] == nd[0, sk.N_FIXZ] == nd[0, sk.N_FIXT] == 1.0          # pole clamped
+    assert nd[-1, sk.N_FIXR] == nd[-1, sk.N_FIXZ] == nd[-1, sk.N_FIXT] == 0.0       # edge free
+    assert np.allclose(nd[:, sk.N_MRR], 2.1 * model.node_mass)                      # 1.1 x own mass, r and z
+    assert np.allclose(nd[:, sk.N_MZZ], 2.1 * model.node_mass) and not np.any(nd[:, sk.N_MRZ])
+    state = run(model, 0.15)
+    r, z = model.profile(state)
+    assert z[0] == model.ref.z0[0] and r[0] == 0.0                # the pole stays where the body holds it
+    assert abs(z[-1] - model.ref.z0[-1]) > 1e-6                   # the edge moves along the axis ...
+    assert r[-1] < 0.99 * 0.03                                    # ... and radially
+    tail = 6 * model.n_nodes
+    vdot = state[tail + sk.S_VDOT]
+    assert vdot < 0.0 and state[tail + sk.S_U] > 0.0              # expelling, and the body moves forward
+    obs = model.observe(state, 0.15, Command())
+    assert -vdot / obs.jet_speed_m_s == pytest.approx(math.pi * 0.0125 ** 2, rel=1e-9)   # fixed nozzle
+    led = model.energy_ledger(state)
+    assert led['created_unpaid_jet_kinetic'] > 0.0 and 'created_wall_loads' in led
+    assert abs(led['closure_relative']) < 1e-4, led
+    with pytest.raises(ModelError, match='not available with coupling: paper_code'):
+        ShellModel.from_scene(cone_scene('paper_code', jet=dict(outlet='edge')))

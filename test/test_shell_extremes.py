@@ -1,15 +1,19 @@
-"""Shell model extremes: each case either runs stable with the ledger closing, or is refused before
-running with a message that says why and what would work.  Never NaN."""
+"""
+Shell model extremes: each case runs stable or is refused with a reason; never NaN.
+
+Shell model extremes: each case either runs stable with the ledger closing, or is refused before
+running with a message that says why and what would work.  Never NaN.
+"""
+
 import copy
 import math
 import pathlib
 
 import numpy as np
-import pytest
-import yaml
-
 from pulsejet_sim.models.base import Command, ModelError, SimulationBlowUp
 from pulsejet_sim.models.shell import ShellModel
+import pytest
+import yaml
 
 CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
 ROBOT = yaml.safe_load((CONFIG / 'shell_robot.yaml').read_text())
@@ -47,14 +51,30 @@ def run(sc, duration=2.0, chunk=0.02):
 
 CASES = {
     # name: (scene, duration, closure tolerance)   measured closure at 2 s in brackets
-    'soft_1kPa_collapses_onto_axis': (scene(ROBOT, material__youngs_modulus_pa=1e3), 2.0, 2e-2),   # 6.4e-3
-    'stiff_10MPa': (scene(ROBOT, material__youngs_modulus_pa=1e7, actuation__amplitude=200.0), 1.0, 1e-5),
-    'no_viscosity': (scene(ROBOT, material__viscosity_pa_s=0.0), 2.0, 1e-5),                        # 8e-7
+    'soft_1kPa_collapses_onto_axis': (
+        scene(ROBOT, material__youngs_modulus_pa=1e3),
+        2.0,
+        2e-2,
+    ),  # 6.4e-3
+    'stiff_10MPa': (
+        scene(ROBOT, material__youngs_modulus_pa=1e7, actuation__amplitude=200.0),
+        1.0,
+        1e-5,
+    ),
+    'no_viscosity': (scene(ROBOT, material__viscosity_pa_s=0.0), 2.0, 1e-5),  # 8e-7
     'high_viscosity_5e4': (scene(ROBOT, material__viscosity_pa_s=5e4), 1.0, 1e-5),
     'fine_mesh_200': (scene(ROBOT, mesh__elements=200), 0.4, 1e-5),
-    'pulsation_5Hz': (scene(ROBOT, actuation__frequency_hz=5.0, actuation__contraction_s=0.08,
-                            actuation__release_s=0.1), 1.0, 1e-5),
-    'cone_85pct_volume_change': (scene(CONE, actuation__amplitude=0.8), 1.0, 5e-4),                 # 4.5e-5
+    'pulsation_5Hz': (
+        scene(
+            ROBOT,
+            actuation__frequency_hz=5.0,
+            actuation__contraction_s=0.08,
+            actuation__release_s=0.1,
+        ),
+        1.0,
+        1e-5,
+    ),
+    'cone_85pct_volume_change': (scene(CONE, actuation__amplitude=0.8), 1.0, 5e-4),  # 4.5e-5
 }
 
 
@@ -65,10 +85,10 @@ def test_extreme_case_runs_with_closed_ledger(name):
     led = model.energy_ledger(state)
     assert abs(led['closure_relative']) < tol, (name, led['closure_relative'])
     if name == 'cone_85pct_volume_change':
-        assert vmin < 0.2 * model.ref.volume_m3()          # > 80 % of the volume expelled
+        assert vmin < 0.2 * model.ref.volume_m3()  # > 80 % of the volume expelled
     if name == 'soft_1kPa_collapses_onto_axis':
         r, _ = model.profile(state)
-        assert r.min() >= 0.0                                 # axis contact holds the wall off the axis
+        assert r.min() >= 0.0  # axis contact holds the wall off the axis
 
 
 def test_closure_of_violent_collapse_improves_with_smaller_step():
@@ -83,14 +103,22 @@ def test_closure_of_violent_collapse_improves_with_smaller_step():
 
 def test_explicit_scheme_refused_above_its_stable_step_with_the_bound_and_a_remedy():
     with pytest.raises(ModelError) as err:
-        ShellModel.from_scene(scene(ROBOT, material__youngs_modulus_pa=1e7, simulation__integrator='verlet'))
+        ShellModel.from_scene(
+            scene(ROBOT, material__youngs_modulus_pa=1e7, simulation__integrator='verlet')
+        )
     msg = str(err.value)
     assert 'simulation.dt_s' in msg and 'stable step' in msg and 'implicit_midpoint' in msg
 
 
 def test_explicit_scheme_at_its_stable_step_runs_and_beyond_blows_up_cleanly():
-    sc = scene(ROBOT, mesh__elements=8, material__viscosity_pa_s=0.0, simulation__integrator='verlet',
-               simulation__dt_s=1e-7, actuation__amplitude=20.0)
+    sc = scene(
+        ROBOT,
+        mesh__elements=8,
+        material__viscosity_pa_s=0.0,
+        simulation__integrator='verlet',
+        simulation__dt_s=1e-7,
+        actuation__amplitude=20.0,
+    )
     model = ShellModel.from_scene(sc)
     bound = model.stable_step_s(model.initial_state())
     ok = ShellModel.from_scene(scene(sc, simulation__dt_s=0.95 * bound))
@@ -99,6 +127,7 @@ def test_explicit_scheme_at_its_stable_step_runs_and_beyond_blows_up_cleanly():
     assert np.all(np.isfinite(state))
     # force a step beyond the bound (bypassing the refusal) -> SimulationBlowUp, state kept finite
     import pulsejet_sim.models.shell_kernels as sk
+
     ok.dt_s = 2.0 * bound
     ok.P[sk.P_DT] = 2.0 * bound
     state = ok.initial_state()
@@ -111,15 +140,26 @@ def test_explicit_scheme_at_its_stable_step_runs_and_beyond_blows_up_cleanly():
 
 def test_routine_not_resolved_by_the_step_is_refused():
     with pytest.raises(ModelError) as err:
-        ShellModel.from_scene(scene(ROBOT, actuation__frequency_hz=5.0, actuation__contraction_s=0.08,
-                                    actuation__release_s=0.1, simulation__dt_s=0.01))
+        ShellModel.from_scene(
+            scene(
+                ROBOT,
+                actuation__frequency_hz=5.0,
+                actuation__contraction_s=0.08,
+                actuation__release_s=0.1,
+                simulation__dt_s=0.01,
+            )
+        )
     assert 'dt_s' in str(err.value) and '0.008' in str(err.value)
 
 
 def test_random_scenes_never_produce_nan():
-    """Seeded random scenes across the allowed ranges: each is refused (ModelError), runs with
+    """
+    Seeded random scenes across the allowed ranges never produce NaN.
+
+    Seeded random scenes across the allowed ranges: each is refused (ModelError), runs with
     finite state and ledger, or stops with SimulationBlowUp at a finite last good state and a
-    message that says what would work."""
+    message that says what would work.
+    """
     rng = np.random.default_rng(7)
     outcomes = []
     for k in range(12):
@@ -128,10 +168,16 @@ def test_random_scenes_never_produce_nan():
         base['material']['youngs_modulus_pa'] = float(10 ** rng.uniform(3, 7))
         base['material']['viscosity_pa_s'] = float(rng.choice([0.0, 10 ** rng.uniform(0, 4.5)]))
         base['material']['poisson_ratio'] = float(rng.uniform(0, 0.49))
-        base['simulation']['integrator'] = str(rng.choice(['implicit_midpoint', 'backward_euler', 'verlet']))
+        base['simulation']['integrator'] = str(
+            rng.choice(['implicit_midpoint', 'backward_euler', 'verlet'])
+        )
         base['simulation']['dt_s'] = float(10 ** rng.uniform(-3.5, -2.3))
         act = base['actuation']
-        act['amplitude'] = float(10 ** rng.uniform(0, 1.7)) if act['kind'] == 'cable' else float(rng.uniform(0, 0.9))
+        act['amplitude'] = (
+            float(10 ** rng.uniform(0, 1.7))
+            if act['kind'] == 'cable'
+            else float(rng.uniform(0, 0.9))
+        )
         try:
             model = ShellModel.from_scene(base)
         except ModelError as err:
