@@ -1,23 +1,26 @@
-"""Summary numbers and a 4-panel plot of a pulsejet MCAP recording (live or offline); a shell
-recording's plot also shows meridian snapshots over one cycle (pulsejet_sim.profiles).
+"""
+Summary numbers and a 4-panel plot of a pulsejet MCAP recording (live or offline).
+
+A shell recording's plot also shows meridian snapshots over one cycle (pulsejet_sim.profiles).
 
 Reads with pulsejet_sim.bag.reader (no rclpy). Time axes are simulation time (header stamps, or
 log times mapped through /clock; see reader.load_series). Integrals use the trapezoidal rule over
 the recorded samples, so their accuracy is that of the publishing rate.
 
-cli.py calls main_summary(argv) / main_plot(argv) (profiles.main_animate uses _run too); they return a
-process exit code (2 on bad input, with a one-line error naming the file and what was expected).
+cli.py calls main_summary(argv) / main_plot(argv) (profiles.main_animate uses _run too); they
+return a process exit code (2 on bad input, with a one-line error naming the file and what was
+expected).
 """
+
 from __future__ import annotations
 
 import argparse
 import math
-import sys
 from pathlib import Path
+import sys
 from typing import Any, Sequence
 
 import numpy as np
-
 from pulsejet_sim import profiles
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, find_topic, iter_bag, load_series
 from pulsejet_sim.interface import LEDGER_STATUS_NAME
@@ -27,6 +30,7 @@ from pulsejet_sim.interface import TOPIC_MANTLE_RADIUS as MANTLE_RADIUS
 from pulsejet_sim.interface import TOPIC_THRUST as THRUST
 from pulsejet_sim.interface import TOPIC_VELOCITY as VELOCITY
 from pulsejet_sim.interface import TOPIC_VOLUME as VOLUME
+
 PULSEJET_TOPICS = (VELOCITY, THRUST, MANTLE_RADIUS, VOLUME, FLUID_MASS, ENERGY_LEDGER)
 
 
@@ -64,7 +68,8 @@ def _final_ledger(path: Path, topic: str) -> tuple[dict[str, float], str]:
 
 
 def summarize(path: str | Path) -> dict[str, Any]:
-    """Key numbers of a run. Units in the key names; NaN where the topic needed is absent.
+    """
+    Key numbers of a run. Units in the key names; NaN where the topic needed is absent.
 
     peak_speed_m_s: max |v|; mean_speed_m_s: time average of |v|; distance_m: net forward travel
     ∫v dt; thrust_impulse_n_s: ∫thrust dt; duration_s: span of simulation time covered;
@@ -76,20 +81,32 @@ def summarize(path: str | Path) -> dict[str, Any]:
     series = load_series(p, info=info)
     present = [rel for rel in PULSEJET_TOPICS if find_topic(info.topics, rel)]
     if not present:
-        raise AnalysisError(f'{str(p)!r} has no pulsejet topics (found {sorted(info.topics) or "none"}); '
-                            f'expected some of {", ".join(PULSEJET_TOPICS)}')
+        raise AnalysisError(
+            f'{str(p)!r} has no pulsejet topics (found {sorted(info.topics) or "none"}); '
+            f'expected some of {", ".join(PULSEJET_TOPICS)}'
+        )
 
     def get(rel: str) -> tuple[np.ndarray, np.ndarray] | None:
         name = find_topic(series, rel)
         return series[name] if name else None
 
-    out: dict[str, Any] = {'file': str(p), 'truncated': info.truncated, 'damage': info.damage_report(),
-                           'messages_recovered': info.message_count, 'bytes_dropped': info.bytes_dropped,
-                           'file_bytes': info.file_size, 'corrupt_chunks': info.corrupt_chunks,
-                           'undecodable_messages': dict(info.undecodable),
-                           'log_span_s': (None if info.first_log_ns is None else
-                                          (info.first_log_ns * 1e-9, info.last_log_ns * 1e-9))}
-    # Simulation-time span: header-stamped topics are exact, /clock next, log-time-mapped ones last.
+    out: dict[str, Any] = {
+        'file': str(p),
+        'truncated': info.truncated,
+        'damage': info.damage_report(),
+        'messages_recovered': info.message_count,
+        'bytes_dropped': info.bytes_dropped,
+        'file_bytes': info.file_size,
+        'corrupt_chunks': info.corrupt_chunks,
+        'undecodable_messages': dict(info.undecodable),
+        'log_span_s': (
+            None
+            if info.first_log_ns is None
+            else (info.first_log_ns * 1e-9, info.last_log_ns * 1e-9)
+        ),
+    }
+    # Simulation-time span: header-stamped topics are exact, /clock next, log-time-mapped ones
+    # last.
     span = None
     for group in ((VELOCITY, THRUST), ('/clock',), (MANTLE_RADIUS, VOLUME, FLUID_MASS)):
         times = [get(rel)[0] for rel in group if get(rel) is not None and len(get(rel)[0])]
@@ -98,28 +115,39 @@ def summarize(path: str | Path) -> dict[str, Any]:
             break
     out['start_time_s'] = float(span[0]) if span else math.nan
     out['duration_s'] = float(span[1] - span[0]) if span else math.nan
-    # a live recording logs wall time: simulated over wall seconds is the real-time factor achieved;
-    # an offline run logs simulation time itself (the factor is then not a property of the file)
+    # a live recording logs wall time: simulated over wall seconds is the real-time factor
+    # achieved; an offline run logs simulation time itself (the factor is then not a property of
+    # the file)
     out['real_time_factor'] = math.nan
     if span and info.first_log_ns is not None and abs(info.first_log_ns * 1e-9 - span[0]) > 1.0:
         # log times are not simulation times: the first and last /clock message give the wall span
         # of the run (other topics, e.g. a late /diagnostics, would stretch it)
-        clock = [(m.log_time_ns, m.msg.clock.sec + 1e-9 * m.msg.clock.nanosec)
-                 for m in iter_bag(p, topics=['/clock'])]
+        clock = [
+            (m.log_time_ns, m.msg.clock.sec + 1e-9 * m.msg.clock.nanosec)
+            for m in iter_bag(p, topics=['/clock'])
+        ]
         if len(clock) >= 2 and clock[-1][0] > clock[0][0]:
-            out['real_time_factor'] = (clock[-1][1] - clock[0][1]) / ((clock[-1][0] - clock[0][0]) * 1e-9)
+            out['real_time_factor'] = (clock[-1][1] - clock[0][1]) / (
+                (clock[-1][0] - clock[0][0]) * 1e-9
+            )
 
     velocity = get(VELOCITY)
     if velocity is not None and len(velocity[0]):
         t, v = velocity
         span = t[-1] - t[0]
         out['peak_speed_m_s'] = float(np.max(np.abs(v)))
-        out['mean_speed_m_s'] = _trapz(np.abs(v), t) / span if span > 0 else float(np.abs(v).mean())
+        out['mean_speed_m_s'] = (
+            _trapz(np.abs(v), t) / span if span > 0 else float(np.abs(v).mean())
+        )
         out['distance_m'] = _trapz(v, t)
         out['final_velocity_m_s'] = float(v[-1])
     else:
-        out.update(peak_speed_m_s=math.nan, mean_speed_m_s=math.nan, distance_m=math.nan,
-                   final_velocity_m_s=math.nan)
+        out.update(
+            peak_speed_m_s=math.nan,
+            mean_speed_m_s=math.nan,
+            distance_m=math.nan,
+            final_velocity_m_s=math.nan,
+        )
 
     thrust = get(THRUST)
     if thrust is not None and len(thrust[0]):
@@ -144,7 +172,11 @@ def summarize(path: str | Path) -> dict[str, Any]:
 
 
 def _fmt(value: float, spec: str = '.6g') -> str:
-    return 'n/a' if value is None or (isinstance(value, float) and math.isnan(value)) else format(value, spec)
+    return (
+        'n/a'
+        if value is None or (isinstance(value, float) and math.isnan(value))
+        else format(value, spec)
+    )
 
 
 def format_summary(summary: dict[str, Any]) -> str:
@@ -152,7 +184,11 @@ def format_summary(summary: dict[str, Any]) -> str:
     rows = [
         ('file', summary.get('file', ''), ''),
         ('duration', _fmt(summary.get('duration_s')), 's'),
-        ('real-time factor', _fmt(summary.get('real_time_factor')), '(simulated / wall seconds, live recordings)'),
+        (
+            'real-time factor',
+            _fmt(summary.get('real_time_factor')),
+            '(simulated / wall seconds, live recordings)',
+        ),
         ('peak speed', _fmt(summary.get('peak_speed_m_s')), 'm/s'),
         ('mean speed', _fmt(summary.get('mean_speed_m_s')), 'm/s'),
         ('distance travelled', _fmt(summary.get('distance_m')), 'm'),
@@ -165,11 +201,15 @@ def format_summary(summary: dict[str, Any]) -> str:
     lines = [f'{name:<{width}}  {value} {unit}'.rstrip() for name, value, unit in rows]
     if summary.get('damage'):
         lines.append(f'{"damaged":<{width}}  {summary["damage"]}')
-        lines.append(f'{"":<{width}}  read up to the last complete chunk (a hard kill loses at most the '
-                     'writer\'s last flush period); `pulsejet repair FILE` writes a complete copy')
+        lines.append(
+            f'{"":<{width}}  read up to the last complete chunk (a hard kill loses at most the '
+            "writer's last flush period); `pulsejet repair FILE` writes a complete copy"
+        )
     elif summary.get('truncated'):
-        lines.append(f'{"note":<{width}}  file has no summary (writer killed hard); '
-                     'read up to the last complete chunk')
+        lines.append(
+            f'{"note":<{width}}  file has no summary (writer killed hard); '
+            'read up to the last complete chunk'
+        )
     lines.append('')
     lines.append('messages per topic')
     counts = summary.get('message_counts', {})
@@ -187,25 +227,35 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 
 def plot_figure(path: str | Path) -> Any:
-    """The figure `plot` writes (a matplotlib Figure, no pyplot): 4 stacked panels against simulation
-    time: mantle radius (mm), volume (ml), velocity (m/s), thrust (N).
+    """
+    Return the figure `plot` writes (a matplotlib Figure, no pyplot).
+
+    4 stacked panels against simulation time: mantle radius (mm), volume (ml), velocity (m/s),
+    thrust (N).
 
     A shell recording (mantle profiles recorded, stored scene not `model: lumped`) gets a fifth
     panel below them, in the same figure and PNG, not sharing their time axis: meridian snapshots
     (r, z) over the last whole actuation cycle, coloured by phase (profiles.draw_cycle_snapshots);
-    the cycle is shaded on the time panels and the snapshot times are marked on the radius. A lumped
-    recording gives the 4 panels alone, as before (see profiles.is_lumped_recording)."""
+    the cycle is shaded on the time panels and the snapshot times are marked on the radius. A
+    lumped recording gives the 4 panels alone, as before (see profiles.is_lumped_recording).
+    """
     # a Figure of its own, no pyplot: the caller's backend and figures are left alone
     from matplotlib.figure import Figure
 
     p = Path(path)
     info = BagInfo(p)
     series = load_series(p, info=info)
-    panels = [(MANTLE_RADIUS, 1e3, 'mantle radius [mm]'), (VOLUME, 1e6, 'volume [ml]'),
-              (VELOCITY, 1.0, 'velocity [m/s]'), (THRUST, 1.0, 'thrust [N]')]
+    panels = [
+        (MANTLE_RADIUS, 1e3, 'mantle radius [mm]'),
+        (VOLUME, 1e6, 'volume [ml]'),
+        (VELOCITY, 1.0, 'velocity [m/s]'),
+        (THRUST, 1.0, 'thrust [N]'),
+    ]
     if not any(find_topic(series, rel) for rel, _, _ in panels):
-        raise AnalysisError(f'{str(p)!r} has no pulsejet state topics (found {sorted(info.topics) or "none"}); '
-                            f'expected some of {", ".join(rel for rel, _, _ in panels)}')
+        raise AnalysisError(
+            f'{str(p)!r} has no pulsejet state topics (found {sorted(info.topics) or "none"}); '
+            f'expected some of {", ".join(rel for rel, _, _ in panels)}'
+        )
     shell = profiles.shows_profiles(p, info)
     fig = Figure(figsize=(9, 12) if shell else (8, 9), constrained_layout=True)
     if shell:
@@ -221,7 +271,9 @@ def plot_figure(path: str | Path) -> Any:
             t, v = series[name]
             ax.plot(t, v * scale, lw=1.0)
         else:
-            ax.text(0.5, 0.5, f'{rel}: not recorded', transform=ax.transAxes, ha='center', va='center')
+            ax.text(
+                0.5, 0.5, f'{rel}: not recorded', transform=ax.transAxes, ha='center', va='center'
+            )
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
     axes[-1].set_xlabel('simulation time [s]')
@@ -234,24 +286,41 @@ def plot_figure(path: str | Path) -> Any:
     return fig
 
 
-SNAPSHOT_AXES_LABEL = 'mantle snapshots'   # the label of the meridian panel's Axes (tests find it by it)
+SNAPSHOT_AXES_LABEL = (
+    'mantle snapshots'  # the label of the meridian panel's Axes (tests find it by it)
+)
 
 
-def _mark_snapshots(time_axes: Sequence[Any], series: dict[str, tuple[np.ndarray, np.ndarray]],
-                    snapshots: Any) -> None:
-    """Shade the snapshot cycle on the time panels and mark the snapshot times on the radius, in the
-    snapshots' colours, so the meridians can be read against the signals."""
+def _mark_snapshots(
+    time_axes: Sequence[Any], series: dict[str, tuple[np.ndarray, np.ndarray]], snapshots: Any
+) -> None:
+    """
+    Shade the snapshot cycle on the time panels and mark the snapshot times on the radius.
+
+    The marks are in the snapshots' colours, so the meridians can be read against the signals.
+    """
     for ax in time_axes:
         ax.axvspan(snapshots.cycle.start_s, snapshots.cycle.end_s, color='0.5', alpha=0.12, lw=0)
     name = find_topic(series, MANTLE_RADIUS)
     if name is not None and len(series[name][0]):
         t, radius_m = series[name]
-        time_axes[0].scatter(snapshots.time_s, np.interp(snapshots.time_s, t, radius_m) * 1e3,
-                             c=snapshots.colors, s=28, zorder=3, edgecolors='k', linewidths=0.5)
+        time_axes[0].scatter(
+            snapshots.time_s,
+            np.interp(snapshots.time_s, t, radius_m) * 1e3,
+            c=snapshots.colors,
+            s=28,
+            zorder=3,
+            edgecolors='k',
+            linewidths=0.5,
+        )
 
 
 def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
-    """Write plot_figure(path) as a PNG (default: the MCAP path with suffix .png). Returns its path."""
+    """
+    Write plot_figure(path) as a PNG (default: the MCAP path with suffix .png).
+
+    Returns its path.
+    """
     p = Path(path)
     fig = plot_figure(p)
     out = Path(png_path) if png_path is not None else p.with_suffix('.png')
@@ -269,9 +338,9 @@ def _run(prog: str, argv: Sequence[str] | None, build, action) -> int:
     except (BagReadError, AnalysisError, profiles.ProfileError) as exc:
         print(f'{prog}: error: {exc}', file=sys.stderr)
         return 2
-    except BrokenPipeError:     # output piped into `head`: nothing left to say
+    except BrokenPipeError:  # output piped into `head`: nothing left to say
         return 0
-    except OSError as exc:      # unreadable file or unwritable PNG path
+    except OSError as exc:  # unreadable file or unwritable PNG path
         if exc.filename is None:
             raise
         print(f'{prog}: error: {str(exc.filename)!r}: {exc.strerror}', file=sys.stderr)
@@ -281,20 +350,26 @@ def _run(prog: str, argv: Sequence[str] | None, build, action) -> int:
 
 def main_summary(argv: Sequence[str] | None = None) -> int:
     """`pulsejet summary FILE.mcap`: print the summary table. Returns the exit code."""
+
     def build(parser: argparse.ArgumentParser) -> None:
         parser.add_argument('file', help='MCAP recording (.mcap)')
 
     def action(args: argparse.Namespace) -> None:
         print(format_summary(summarize(args.file)))
+
     return _run('pulsejet summary', argv, build, action)
 
 
 def main_plot(argv: Sequence[str] | None = None) -> int:
     """`pulsejet plot FILE.mcap [--out PNG]`: write the PNG of plot_figure and print its path."""
+
     def build(parser: argparse.ArgumentParser) -> None:
         parser.add_argument('file', help='MCAP recording (.mcap)')
-        parser.add_argument('--out', default=None, help='PNG path (default: FILE with .png suffix)')
+        parser.add_argument(
+            '--out', default=None, help='PNG path (default: FILE with .png suffix)'
+        )
 
     def action(args: argparse.Namespace) -> None:
         print(plot(args.file, args.out))
+
     return _run('pulsejet plot', argv, build, action)

@@ -1,26 +1,29 @@
-"""`make demo`: sim_node + controller_node as processes, every topic recorded to MCAP, then a summary.
+r"""
+`make demo`: sim_node + controller_node as processes, every topic recorded to MCAP, then a summary.
 
-    python -m pulsejet_sim.demo [--scene shell_robot] [--duration 10] [--real-time-factor 1] [--out FILE]
+    python -m pulsejet_sim.demo [--scene shell_robot] [--duration 10] [--real-time-factor 1] \
+        [--out FILE]
 
 The nodes run in their own ROS domain (ROS_DOMAIN_ID from the environment if set, otherwise one
 derived from this process id) with localhost-only discovery. The recording is written to
 `runs/demo-<timestamp>.mcap` (or --out); the plot is written next to it.
 """
+
 from __future__ import annotations
 
 import argparse
 import datetime as _dt
 import os
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 from pulsejet_sim.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 
-STARTUP_TIMEOUT_S = 60.0     # scene loading + JIT compilation of a cold cache
+STARTUP_TIMEOUT_S = 60.0  # scene loading + JIT compilation of a cold cache
 STOP_TIMEOUT_S = 10.0
 
 
@@ -61,16 +64,31 @@ def tail(path: Path, lines: int = 25) -> str:
 
 
 def make_recorder(node, path: Path):
-    """In-process recorder of every pulsejet topic (commands, ledger and /clock included) and of
-    /diagnostics (the node's health: achieved real-time factor, dropped time, watchdog, faults)."""
+    """
+    Return an in-process recorder of every pulsejet topic and of /diagnostics.
+
+    The pulsejet topics include the commands, the ledger and /clock; /diagnostics carries the
+    node's health: achieved real-time factor, dropped time, watchdog, faults.
+    """
     from pulsejet_sim import messages
     from pulsejet_sim.recorder import Recorder
-    return Recorder(node, str(path), list(messages.TOPIC_TYPES)
-                    + [f'{messages.TOPIC_DIAGNOSTICS}:diagnostic_msgs/msg/DiagnosticArray'])
+
+    return Recorder(
+        node,
+        str(path),
+        list(messages.TOPIC_TYPES)
+        + [f'{messages.TOPIC_DIAGNOSTICS}:diagnostic_msgs/msg/DiagnosticArray'],
+    )
 
 
-def run_demo(scene: str, duration_s: float, real_time_factor: float, out: Path,
-             publish_rate_hz: float = 0.0, quiet: bool = False) -> dict:
+def run_demo(
+    scene: str,
+    duration_s: float,
+    real_time_factor: float,
+    out: Path,
+    publish_rate_hz: float = 0.0,
+    quiet: bool = False,
+) -> dict:
     """Run the demo; returns {'mcap': Path, 'codes': {...}, 'messages': int}. Raises DemoError."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -85,14 +103,24 @@ def run_demo(scene: str, duration_s: float, real_time_factor: float, out: Path,
     domain_id = int(env['ROS_DOMAIN_ID'])
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = env['ROS_AUTOMATIC_DISCOVERY_RANGE']
     log = (lambda *a: None) if quiet else (lambda *a: print(*a, flush=True))
-    log(f'pulsejet demo: scene {scene!r}, {duration_s:g} s simulated at real-time factor '
+    log(
+        f'pulsejet demo: scene {scene!r}, {duration_s:g} s simulated at real-time factor '
         f'{real_time_factor:g}, ROS_DOMAIN_ID={domain_id}, '
-        f'discovery {env["ROS_AUTOMATIC_DISCOVERY_RANGE"]}')
+        f'discovery {env["ROS_AUTOMATIC_DISCOVERY_RANGE"]}'
+    )
 
     stem = out.with_suffix('') if out.suffix == '.mcap' else out
-    logs = {'controller_node': Path(f'{stem}.controller_node.log'), 'sim_node': Path(f'{stem}.sim_node.log')}
-    sim_params = {'scene': scene, 'duration_s': float(duration_s), 'real_time_factor': float(real_time_factor),
-                  'wait_for_subscribers': 2, 'wait_timeout_s': 30.0}
+    logs = {
+        'controller_node': Path(f'{stem}.controller_node.log'),
+        'sim_node': Path(f'{stem}.sim_node.log'),
+    }
+    sim_params = {
+        'scene': scene,
+        'duration_s': float(duration_s),
+        'real_time_factor': float(real_time_factor),
+        'wait_for_subscribers': 2,
+        'wait_timeout_s': 30.0,
+    }
     if publish_rate_hz > 0:
         sim_params['publish_rate_hz'] = float(publish_rate_hz)
     commands = {
@@ -101,16 +129,21 @@ def run_demo(scene: str, duration_s: float, real_time_factor: float, out: Path,
     }
 
     # Ctrl-C reaches the whole process group: note it here (the handler runs before the next
-    # poll of the children), so that children stopping on the same signal are not reported as failures
+    # poll of the children), so that children stopping on the same signal are not reported as
+    # failures
     stop_requested = {'signal': None}
 
     def on_signal(signum, _frame):
         stop_requested['signal'] = signum
+
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
 
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id,
-               signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    rclpy.init(
+        context=context,
+        domain_id=domain_id,
+        signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+    )
     procs: dict[str, subprocess.Popen] = {}
     files = []
     recorder = None
@@ -125,10 +158,13 @@ def run_demo(scene: str, duration_s: float, real_time_factor: float, out: Path,
         for name, cmd in commands.items():
             f = open(logs[name], 'wb')
             files.append(f)
-            procs[name] = subprocess.Popen(cmd, env=env, stdout=f, stderr=subprocess.STDOUT,
-                                           stdin=subprocess.DEVNULL)
-        log(f'started controller_node (pid {procs["controller_node"].pid}) and sim_node '
-            f'(pid {procs["sim_node"].pid}); logs in {logs["sim_node"].parent}/')
+            procs[name] = subprocess.Popen(
+                cmd, env=env, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+            )
+        log(
+            f'started controller_node (pid {procs["controller_node"].pid}) and sim_node '
+            f'(pid {procs["sim_node"].pid}); logs in {logs["sim_node"].parent}/'
+        )
         deadline = time.monotonic() + STARTUP_TIMEOUT_S + duration_s / real_time_factor
         sim = procs['sim_node']
         try:
@@ -137,12 +173,18 @@ def run_demo(scene: str, duration_s: float, real_time_factor: float, out: Path,
                 if stop_requested['signal'] is not None:
                     raise KeyboardInterrupt
                 if procs['controller_node'].poll() is not None:
-                    raise DemoError(f'controller_node exited early with code {procs["controller_node"].returncode}:\n'
-                                    + tail(logs['controller_node']))
+                    raise DemoError(
+                        'controller_node exited early with code '
+                        f'{procs["controller_node"].returncode}:\n'
+                        + tail(logs['controller_node'])
+                    )
                 if time.monotonic() > deadline:
-                    raise DemoError(f'sim_node did not finish {duration_s:g} s of simulated time in '
-                                    f'{STARTUP_TIMEOUT_S + duration_s / real_time_factor:.0f} s of wall time:\n'
-                                    + tail(logs['sim_node']))
+                    raise DemoError(
+                        f'sim_node did not finish {duration_s:g} s of simulated time in '
+                        f'{STARTUP_TIMEOUT_S + duration_s / real_time_factor:.0f} s of wall '
+                        'time:\n'
+                        + tail(logs['sim_node'])
+                    )
         except KeyboardInterrupt:
             interrupted = True
         # drain what is still in flight
@@ -167,21 +209,33 @@ def run_demo(scene: str, duration_s: float, real_time_factor: float, out: Path,
     if interrupted:
         log('interrupted: the nodes were stopped')
         if count != 0 and out.exists():
-            return {'mcap': out, 'codes': codes, 'messages': count, 'logs': logs, 'interrupted': True}
+            return {
+                'mcap': out,
+                'codes': codes,
+                'messages': count,
+                'logs': logs,
+                'interrupted': True,
+            }
         raise KeyboardInterrupt
     if codes.get('sim_node') != 0:
-        raise DemoError(f'sim_node failed with exit code {codes.get("sim_node")}:\n' + tail(logs['sim_node']))
+        raise DemoError(
+            f'sim_node failed with exit code {codes.get("sim_node")}:\n' + tail(logs['sim_node'])
+        )
     if codes.get('controller_node') not in (0, -signal.SIGINT):
-        raise DemoError(f'controller_node failed with exit code {codes.get("controller_node")}:\n'
-                        + tail(logs['controller_node']))
+        raise DemoError(
+            f'controller_node failed with exit code {codes.get("controller_node")}:\n'
+            + tail(logs['controller_node'])
+        )
     if not out.exists() or count == 0:
-        raise DemoError(f'no data was recorded to {out} (the recorder saw no messages; '
-                        f'is discovery blocked? ROS_DOMAIN_ID={domain_id})')
+        raise DemoError(
+            f'no data was recorded to {out} (the recorder saw no messages; '
+            f'is discovery blocked? ROS_DOMAIN_ID={domain_id})'
+        )
     return {'mcap': out, 'codes': codes, 'messages': count, 'logs': logs, 'interrupted': False}
 
 
 def recorded_messages(recorder) -> int:
-    """Number of messages the recorder wrote, if it tells; -1 if unknown."""
+    """Return the number of messages the recorder wrote, if it tells; -1 if unknown."""
     for attr in ('message_counts', 'message_count', 'count'):
         v = getattr(recorder, attr, None)
         if v is None:
@@ -203,12 +257,22 @@ def default_out() -> Path:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog='python -m pulsejet_sim.demo', description=__doc__.split('\n')[0])
-    parser.add_argument('--scene', default=DEFAULT_SCENE, help='scene name under config/ or a YAML path')
-    parser.add_argument('--duration', type=float, default=10.0, help='simulated seconds (default 10)')
-    parser.add_argument('--real-time-factor', type=float, default=1.0, help='simulated s per wall s (default 1)')
+    parser = argparse.ArgumentParser(
+        prog='python -m pulsejet_sim.demo', description=__doc__.strip().split('\n')[0]
+    )
+    parser.add_argument(
+        '--scene', default=DEFAULT_SCENE, help='scene name under config/ or a YAML path'
+    )
+    parser.add_argument(
+        '--duration', type=float, default=10.0, help='simulated seconds (default 10)'
+    )
+    parser.add_argument(
+        '--real-time-factor', type=float, default=1.0, help='simulated s per wall s (default 1)'
+    )
     parser.add_argument('--publish-rate', type=float, default=0.0, help='Hz; 0 = scene value')
-    parser.add_argument('--out', type=Path, default=None, help='MCAP file (default runs/demo-<timestamp>.mcap)')
+    parser.add_argument(
+        '--out', type=Path, default=None, help='MCAP file (default runs/demo-<timestamp>.mcap)'
+    )
     args = parser.parse_args(argv)
     out = args.out or default_out()
     try:
@@ -220,10 +284,13 @@ def main(argv=None) -> int:
         print('demo interrupted', file=sys.stderr)
         return 130
     from pulsejet_sim import analysis
+
     mcap = result['mcap']
     try:
         summary = analysis.summarize(mcap)
-    except Exception as exc:  # noqa: BLE001 - report what was recorded and why it could not be read
+    except (
+        Exception
+    ) as exc:  # noqa: BLE001 - report what was recorded and why it could not be read
         print(f'demo failed: could not read {mcap}: {type(exc).__name__}: {exc}', file=sys.stderr)
         return 1
     print(analysis.format_summary(summary), flush=True)

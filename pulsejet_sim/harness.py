@@ -1,14 +1,18 @@
-"""Test harness: the real sim_node (and optionally controller_node) as processes in an isolated DDS domain.
+"""
+Test harness: the real sim_node (and optionally controller_node) as processes.
+
+The processes run in an isolated DDS domain.
 
     from pulsejet_sim.harness import SimHarness
 
     with SimHarness(scene='pump_cycle', pacing='lockstep', parameters={'step_count': 1000}) as h:
-        h.send(valve_opening=0.0, pump_flow_m3_s=2.5e-3)      # held from the next physics step on
-        s = h.step()                                          # 1000 steps = 0.1 s, returns the new state
+        h.send(valve_opening=0.0, pump_flow_m3_s=2.5e-3)  # held from the next physics step on
+        s = h.step()  # 1000 steps = 0.1 s, returns the new state
         assert s.time_s == pytest.approx(0.1)
         h.set_parameters(pacing='real_time', real_time_factor=2.0)
-        h.wait_for(lambda s: s.volume_m3 > 2e-3, timeout_s=10)  # raises TimeoutError with the last state
-        h.reset()                                             # simulated time back to 0
+        # raises TimeoutError with the last state:
+        h.wait_for(lambda s: s.volume_m3 > 2e-3, timeout_s=10)
+        h.reset()  # simulated time back to 0
 
 `SimHarness` starts `python -m pulsejet_sim.sim_node` (and `pulsejet_ctrl.controller_node` with
 `controller=True`) as subprocesses in their own ROS domain (`domain_id`, default 215 + pid % 18,
@@ -25,50 +29,56 @@ values of the other state topics. While paused or in lockstep the node re-publis
 state every 0.5 s, so `states` may repeat a time. Two harnesses alive at once in one process need
 distinct `domain_id`s (the default is per process). `reset()` makes the time go back to 0.
 """
+
 from __future__ import annotations
 
 import collections
 import dataclasses
 import math
 import os
+from pathlib import Path
 import signal
 import subprocess
 import tempfile
 import time
-from pathlib import Path
 from typing import Any, Callable
 
 from pulsejet_sim import interface as names
 from pulsejet_sim.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 
-DOMAIN_BASE = 215   # 215-232: a range ROS documents as safe on Linux
+DOMAIN_BASE = 215  # 215-232: a range ROS documents as safe on Linux
 DOMAIN_SPAN = 18
-STARTUP_TIMEOUT_S = 90.0      # scene loading + JIT compilation of a cold cache
+STARTUP_TIMEOUT_S = 90.0  # scene loading + JIT compilation of a cold cache
 STOP_TIMEOUT_S = 10.0
 SERVICE_TIMEOUT_S = 30.0
 SIM_NODE_NAME = '/sim_node'
 
 
 class HarnessError(RuntimeError):
-    """A node died, did not start, or a service could not be reached (the message has the log tail)."""
+    """
+    A node died, did not start, or a service could not be reached.
+
+    The message has the log tail.
+    """
 
 
 @dataclasses.dataclass(frozen=True)
 class SimState:
-    """One published state of the simulator (SI units), assembled when its /clock sample arrives."""
+    """One published state of the simulator (SI units), built when its /clock sample arrives."""
+
     time_s: float
     velocity_m_s: float
     volume_m3: float
     mantle_radius_m: float
     thrust_n: float
     fluid_mass_kg: float
-    wall_s: float            # time.monotonic() when it was received
+    wall_s: float  # time.monotonic() when it was received
 
 
 @dataclasses.dataclass(frozen=True)
 class Diagnostic:
-    level: int               # diagnostic_msgs/DiagnosticStatus OK=0, WARN=1, ERROR=2
+    level: int  # diagnostic_msgs/DiagnosticStatus OK=0, WARN=1, ERROR=2
     message: str
     values: dict
     time_s: float
@@ -91,8 +101,9 @@ class NodeProcess:
         self.log_path = log_path
         args = node_command(module, params)
         self._log = open(log_path, 'wb')
-        self.proc = subprocess.Popen(args, stdout=self._log, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, env=env)
+        self.proc = subprocess.Popen(
+            args, stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env
+        )
 
     @property
     def pid(self) -> int:
@@ -121,21 +132,32 @@ class NodeProcess:
 
 
 class SimHarness:
-    """sim_node (+ controller_node) processes and an in-process client node; use as a context manager.
+    """
+    sim_node (+ controller_node) processes and an in-process client node; use as a context manager.
 
     scene, pacing: sim_node parameters (pacing: real_time | as_fast_as_possible | lockstep).
-    parameters: further sim_node parameters ({'real_time_factor': 2.0, 'watchdog_timeout_s': 0.5, ...});
-        a dict value for 'scene_overrides' is passed as YAML.
-    controller: also start controller_node (controller_parameters are its parameters; scene is shared).
+    parameters: further sim_node parameters ({'real_time_factor': 2.0, 'watchdog_timeout_s': 0.5,
+        ...}); a dict value for 'scene_overrides' is passed as YAML.
+    controller: also start controller_node (controller_parameters are its parameters; scene is
+        shared).
     domain_id: ROS domain (default 215 + pid % 18); discovery is localhost only.
     wait_started: on entering, wait until the services answer and a first state arrived.
     """
 
-    def __init__(self, scene: str = DEFAULT_SCENE, controller: bool = False, pacing: str = 'real_time',
-                 parameters: dict | None = None, controller_parameters: dict | None = None,
-                 domain_id: int | None = None, log_dir: str | os.PathLike | None = None,
-                 startup_timeout_s: float = STARTUP_TIMEOUT_S, stop_timeout_s: float = STOP_TIMEOUT_S,
-                 wait_started: bool = True, history: int = 100_000):
+    def __init__(
+        self,
+        scene: str = DEFAULT_SCENE,
+        controller: bool = False,
+        pacing: str = 'real_time',
+        parameters: dict | None = None,
+        controller_parameters: dict | None = None,
+        domain_id: int | None = None,
+        log_dir: str | os.PathLike | None = None,
+        startup_timeout_s: float = STARTUP_TIMEOUT_S,
+        stop_timeout_s: float = STOP_TIMEOUT_S,
+        wait_started: bool = True,
+        history: int = 100_000,
+    ):
         self.scene = scene
         self.pacing = pacing
         self.parameters = dict(parameters or {})
@@ -155,10 +177,12 @@ class SimHarness:
         self.exit_codes: dict[str, int] = {}
         self.states: collections.deque[SimState] = collections.deque(maxlen=history)
         self.diagnostics_received: collections.deque[Diagnostic] = collections.deque(maxlen=1000)
-        self.applied: collections.deque[tuple[float, Any, float]] = collections.deque(maxlen=history)
+        self.applied: collections.deque[tuple[float, Any, float]] = collections.deque(
+            maxlen=history
+        )
         self.context = self.node = self.executor = None
         self._values: dict[str, float] = {}
-        self._received = 0   # states received in total
+        self._received = 0  # states received in total
         self._closed = False
 
     # -- life cycle -----------------------------------------------------------------------------
@@ -184,12 +208,12 @@ class SimHarness:
         return env
 
     def start(self) -> None:
-        import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import TwistStamped, WrenchStamped
+        from rcl_interfaces.srv import GetParameters, SetParameters
+        import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
-        from rcl_interfaces.srv import GetParameters, SetParameters
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64
@@ -202,19 +226,26 @@ class SimHarness:
         sim_params.update(self.parameters)
         if isinstance(sim_params.get('scene_overrides'), dict):
             import yaml
-            sim_params['scene_overrides'] = yaml.safe_dump(sim_params['scene_overrides'],
-                                                           default_flow_style=True).strip()
+
+            sim_params['scene_overrides'] = yaml.safe_dump(
+                sim_params['scene_overrides'], default_flow_style=True
+            ).strip()
         if self.controller:
             params = {'scene': self.scene}
             params.update(self.controller_parameters)
-            self.processes['controller_node'] = NodeProcess('pulsejet_ctrl.controller_node', params,
-                                                            self.log_dir / 'controller_node.log', env)
-        self.processes['sim_node'] = NodeProcess('pulsejet_sim.sim_node', sim_params,
-                                                 self.log_dir / 'sim_node.log', env)
+            self.processes['controller_node'] = NodeProcess(
+                'pulsejet_ctrl.controller_node', params, self.log_dir / 'controller_node.log', env
+            )
+        self.processes['sim_node'] = NodeProcess(
+            'pulsejet_sim.sim_node', sim_params, self.log_dir / 'sim_node.log', env
+        )
 
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=self.domain_id,
-                   signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        rclpy.init(
+            context=self.context,
+            domain_id=self.domain_id,
+            signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
+        )
         self.node = rclpy.create_node(f'sim_harness_{os.getpid()}', context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -222,30 +253,49 @@ class SimHarness:
         self.qos = qos
         for topic in (names.TOPIC_VOLUME, names.TOPIC_MANTLE_RADIUS, names.TOPIC_FLUID_MASS):
             self.node.create_subscription(Float64, topic, self._store_value(topic), qos)
-        self.node.create_subscription(TwistStamped, names.TOPIC_VELOCITY,
-                                      lambda m: self._values.__setitem__('velocity', m.twist.linear.x), qos)
-        self.node.create_subscription(WrenchStamped, names.TOPIC_THRUST,
-                                      lambda m: self._values.__setitem__('thrust', m.wrench.force.x), qos)
+        self.node.create_subscription(
+            TwistStamped,
+            names.TOPIC_VELOCITY,
+            lambda m: self._values.__setitem__('velocity', m.twist.linear.x),
+            qos,
+        )
+        self.node.create_subscription(
+            WrenchStamped,
+            names.TOPIC_THRUST,
+            lambda m: self._values.__setitem__('thrust', m.wrench.force.x),
+            qos,
+        )
         self.node.create_subscription(Clock, names.TOPIC_CLOCK, self._on_clock, qos)
-        self.node.create_subscription(JointState, names.TOPIC_APPLIED_COMMAND, self._on_applied, qos)
-        self.node.create_subscription(DiagnosticArray, names.TOPIC_DIAGNOSTICS, self._on_diagnostics, qos)
-        self._cmd_pubs = {field: self.node.create_publisher(Float64, topic, qos)
-                          for topic, field in names.COMMAND_FIELDS.items()}
+        self.node.create_subscription(
+            JointState, names.TOPIC_APPLIED_COMMAND, self._on_applied, qos
+        )
+        self.node.create_subscription(
+            DiagnosticArray, names.TOPIC_DIAGNOSTICS, self._on_diagnostics, qos
+        )
+        self._cmd_pubs = {
+            field: self.node.create_publisher(Float64, topic, qos)
+            for topic, field in names.COMMAND_FIELDS.items()
+        }
         self._clients = {
             'pause': self.node.create_client(SetBool, names.SERVICE_PAUSE),
             'step': self.node.create_client(Trigger, names.SERVICE_STEP),
             'reset': self.node.create_client(Trigger, names.SERVICE_RESET),
-            f'{SIM_NODE_NAME}/set_parameters': self.node.create_client(SetParameters,
-                                                                       f'{SIM_NODE_NAME}/set_parameters'),
-            f'{SIM_NODE_NAME}/get_parameters': self.node.create_client(GetParameters,
-                                                                       f'{SIM_NODE_NAME}/get_parameters'),
+            f'{SIM_NODE_NAME}/set_parameters': self.node.create_client(
+                SetParameters, f'{SIM_NODE_NAME}/set_parameters'
+            ),
+            f'{SIM_NODE_NAME}/get_parameters': self.node.create_client(
+                GetParameters, f'{SIM_NODE_NAME}/get_parameters'
+            ),
         }
         if self.wait_started:
             self.wait_until_started()
 
     def wait_until_started(self, timeout_s: float | None = None) -> SimState:
-        """Services available, command topics matched, a first state received (and the controller,
-        when started, matched on /clock and the command topics)."""
+        """
+        Wait until services are available, command topics matched and a first state received.
+
+        The controller, when started, must also be matched on /clock and the command topics.
+        """
         timeout_s = self.startup_timeout_s if timeout_s is None else timeout_s
         end = time.monotonic() + timeout_s
         clients = list(self._clients.values())
@@ -255,11 +305,16 @@ class SimHarness:
                 return False
             if not all(p.get_subscription_count() > 0 for p in self._cmd_pubs.values()):
                 return False
-            if self.controller and (self.node.count_subscribers(names.TOPIC_CLOCK) < 2
-                                    or self.node.count_publishers(names.TOPIC_CMD_VALVE) < 2):
+            if self.controller and (
+                self.node.count_subscribers(names.TOPIC_CLOCK) < 2
+                or self.node.count_publishers(names.TOPIC_CMD_VALVE) < 2
+            ):
                 return False
             return bool(self.states)
-        self.spin_until(ready, timeout_s=max(0.0, end - time.monotonic()), what='sim_node to start')
+
+        self.spin_until(
+            ready, timeout_s=max(0.0, end - time.monotonic()), what='sim_node to start'
+        )
         return self.states[-1]
 
     def close(self) -> dict[str, int]:
@@ -272,6 +327,7 @@ class SimHarness:
                 self.exit_codes[name] = self.processes[name].stop(self.stop_timeout_s)
         if self.context is not None:
             import rclpy
+
             try:
                 if self.executor is not None:
                     self.executor.shutdown(timeout_sec=1.0)
@@ -291,36 +347,55 @@ class SimHarness:
 
         def cb(msg):
             self._values[key] = msg.data
+
         return cb
 
     def _on_clock(self, msg):
         v = self._values
         self._received += 1
-        self.states.append(SimState(
-            time_s=_stamp_s(msg.clock), velocity_m_s=v.get('velocity', math.nan),
-            volume_m3=v.get('volume', math.nan), mantle_radius_m=v.get('mantle_radius', math.nan),
-            thrust_n=v.get('thrust', math.nan), fluid_mass_kg=v.get('fluid_mass', math.nan),
-            wall_s=time.monotonic()))
+        self.states.append(
+            SimState(
+                time_s=_stamp_s(msg.clock),
+                velocity_m_s=v.get('velocity', math.nan),
+                volume_m3=v.get('volume', math.nan),
+                mantle_radius_m=v.get('mantle_radius', math.nan),
+                thrust_n=v.get('thrust', math.nan),
+                fluid_mass_kg=v.get('fluid_mass', math.nan),
+                wall_s=time.monotonic(),
+            )
+        )
 
     def _on_applied(self, msg):
         from pulsejet_sim.messages import command_from_applied
+
         t, cmd = command_from_applied(msg)
         self.applied.append((t, cmd, time.monotonic()))
 
     def _on_diagnostics(self, msg):
         for status in msg.status:
             if status.name.startswith('pulsejet: ') and status.name.endswith('sim_node'):
-                self.diagnostics_received.append(Diagnostic(
-                    level=int.from_bytes(status.level, 'little') if isinstance(status.level, bytes) else
-                    int(status.level), message=status.message, values={kv.key: kv.value for kv in status.values},
-                    time_s=_stamp_s(msg.header.stamp), wall_s=time.monotonic()))
+                self.diagnostics_received.append(
+                    Diagnostic(
+                        level=(
+                            int.from_bytes(status.level, 'little')
+                            if isinstance(status.level, bytes)
+                            else int(status.level)
+                        ),
+                        message=status.message,
+                        values={kv.key: kv.value for kv in status.values},
+                        time_s=_stamp_s(msg.header.stamp),
+                        wall_s=time.monotonic(),
+                    )
+                )
 
     # -- spinning and waiting -------------------------------------------------------------------
 
     def _check_alive(self):
         for name, p in self.processes.items():
             if not p.alive():
-                raise HarnessError(f'{name} exited with code {p.proc.returncode}:\n{p.output()[-3000:]}')
+                raise HarnessError(
+                    f'{name} exited with code {p.proc.returncode}:\n{p.output()[-3000:]}'
+                )
 
     def spin(self, seconds: float) -> None:
         end = time.monotonic() + seconds
@@ -330,16 +405,23 @@ class SimHarness:
                 return
             self.executor.spin_once(timeout_sec=min(0.02, left))
 
-    def spin_until(self, predicate: Callable[[], bool], timeout_s: float = 10.0, what: str = 'condition',
-                   check_alive: bool = True) -> None:
+    def spin_until(
+        self,
+        predicate: Callable[[], bool],
+        timeout_s: float = 10.0,
+        what: str = 'condition',
+        check_alive: bool = True,
+    ) -> None:
         end = time.monotonic() + timeout_s
         while not predicate():
             if check_alive:
                 self._check_alive()
             if time.monotonic() > end:
                 last = self.states[-1] if self.states else None
-                raise TimeoutError(f'timed out after {timeout_s:g} s waiting for {what}; last state: {last}\n'
-                                   f'sim_node log tail:\n{self.output()[-2000:]}')
+                raise TimeoutError(
+                    f'timed out after {timeout_s:g} s waiting for {what}; last state: {last}\n'
+                    f'sim_node log tail:\n{self.output()[-2000:]}'
+                )
             self.executor.spin_once(timeout_sec=0.02)
 
     def wait_for_exit(self, name: str = 'sim_node', timeout_s: float = 60.0) -> int:
@@ -356,18 +438,26 @@ class SimHarness:
     def time_s(self) -> float:
         return self.states[-1].time_s if self.states else math.nan
 
-    def wait_for(self, predicate: Callable[[SimState], bool], timeout_s: float = 10.0,
-                 what: str | None = None, since_wall: float | None = None) -> SimState:
-        """The first state satisfying predicate(state), starting from the latest one already
-        received (or, with since_wall, from the first received at or after that time.monotonic());
-        TimeoutError naming the last state otherwise."""
+    def wait_for(
+        self,
+        predicate: Callable[[SimState], bool],
+        timeout_s: float = 10.0,
+        what: str | None = None,
+        since_wall: float | None = None,
+    ) -> SimState:
+        """
+        Return the first state satisfying predicate(state).
+
+        Starts from the latest one already received (or, with since_wall, from the first received
+        at or after that time.monotonic()); TimeoutError naming the last state otherwise.
+        """
         first = self._received - 1 if since_wall is None else self._received - len(self.states)
         pos = [max(first, 0)]
         found: list[SimState] = []
 
         def check():
             states, total = self.states, self._received
-            offset = total - len(states)          # index of states[0] in the whole stream
+            offset = total - len(states)  # index of states[0] in the whole stream
             for i in range(max(pos[0], offset), total):
                 s = states[i - offset]
                 if (since_wall is None or s.wall_s >= since_wall) and predicate(s):
@@ -375,13 +465,22 @@ class SimHarness:
                     return True
             pos[0] = total
             return False
+
         name = getattr(predicate, '__name__', '<lambda>')
-        self.spin_until(check, timeout_s, what or ('a state satisfying the predicate' if name == '<lambda>' else name))
+        self.spin_until(
+            check,
+            timeout_s,
+            what or ('a state satisfying the predicate' if name == '<lambda>' else name),
+        )
         return found[0]
 
-    def wait_for_diagnostics(self, predicate: Callable[[Diagnostic], bool] = lambda d: True,
-                             timeout_s: float = 10.0, what: str = 'a diagnostic') -> Diagnostic:
-        """The first /diagnostics status received from now on with predicate(d) true."""
+    def wait_for_diagnostics(
+        self,
+        predicate: Callable[[Diagnostic], bool] = lambda d: True,
+        timeout_s: float = 10.0,
+        what: str = 'a diagnostic',
+    ) -> Diagnostic:
+        """Return the first /diagnostics status received from now on with predicate(d) true."""
         n0 = len(self.diagnostics_received)
         found = []
 
@@ -391,17 +490,26 @@ class SimHarness:
                     found.append(d)
                     return True
             return False
+
         self.spin_until(check, timeout_s, what)
         return found[0]
 
     # -- commands, services, parameters ---------------------------------------------------------
 
-    def send(self, pump_flow_m3_s: float | None = None, valve_opening: float | None = None,
-             cable_force_n: float | None = None) -> float:
+    def send(
+        self,
+        pump_flow_m3_s: float | None = None,
+        valve_opening: float | None = None,
+        cable_force_n: float | None = None,
+    ) -> float:
         """Publish the given commands (each on its topic); returns the wall time of publication."""
         from std_msgs.msg import Float64
-        for field, value in (('valve_opening', valve_opening), ('pump_flow_m3_s', pump_flow_m3_s),
-                             ('cable_force_n', cable_force_n)):
+
+        for field, value in (
+            ('valve_opening', valve_opening),
+            ('pump_flow_m3_s', pump_flow_m3_s),
+            ('cable_force_n', cable_force_n),
+        ):
             if value is not None:
                 self._cmd_pubs[field].publish(Float64(data=float(value)))
         return time.monotonic()
@@ -416,16 +524,22 @@ class SimHarness:
 
     def pause(self):
         from std_srvs.srv import SetBool
+
         return self.call('pause', SetBool.Request(data=True))
 
     def resume(self):
         from std_srvs.srv import SetBool
+
         return self.call('pause', SetBool.Request(data=False))
 
     def step(self, n: int | None = None, check: bool = True):
-        """Advance n physics steps (default: the node's step_count) while paused or in lockstep and
-        return the new state (with check=False: the service response, even when refused)."""
+        """
+        Advance n physics steps (default: the node's step_count) while paused or in lockstep.
+
+        Returns the new state (with check=False: the service response, even when refused).
+        """
         from std_srvs.srv import Trigger
+
         if n is not None:
             self.set_parameters(check=True, step_count=int(n))
         response = self.call('step', Trigger.Request())
@@ -438,11 +552,14 @@ class SimHarness:
     def reset(self):
         """Back to the scene's initial state at t=0; returns the t=0 state."""
         from std_srvs.srv import Trigger
+
         t_call = time.monotonic()
         response = self.call('reset', Trigger.Request())
         if not response.success:
             raise HarnessError(f'reset refused: {response.message}')
-        return self.wait_for(lambda s: s.time_s == 0.0, 10.0, 'the state at t=0 after reset', since_wall=t_call)
+        return self.wait_for(
+            lambda s: s.time_s == 0.0, 10.0, 'the state at t=0 after reset', since_wall=t_call
+        )
 
     def _wait_published(self, message: str) -> SimState:
         # the response names the new time ('... to t=0.100000 s'); wait for its state, then drain
@@ -450,23 +567,38 @@ class SimHarness:
             t = float(message.split('to t=')[1].split()[0])
         except (IndexError, ValueError):
             return self.latest
-        self.spin_until(lambda: self.states and abs(self.states[-1].time_s - t) < 5e-7, 10.0,
-                        f'the state at t={t}')
+        self.spin_until(
+            lambda: self.states and abs(self.states[-1].time_s - t) < 5e-7,
+            10.0,
+            f'the state at t={t}',
+        )
         self.spin(0.02)
         return self.latest
 
     def set_parameters(self, check: bool = False, **values) -> list:
-        """Set sim_node parameters through its SetParameters service; returns the
-        rcl_interfaces/SetParametersResult list (check=True raises HarnessError on a rejection)."""
+        """
+        Set sim_node parameters through its SetParameters service.
+
+        Returns the rcl_interfaces/SetParametersResult list (check=True raises HarnessError on a
+        rejection).
+        """
         return self.set_parameters_of(SIM_NODE_NAME, check, **values)
 
     def set_parameters_of(self, node_name: str, check: bool = False, **values) -> list:
-        """set_parameters for any node (e.g. '/controller_node'), through its real parameter service."""
+        """
+        Set parameters of any node through its real parameter service.
+
+        Like set_parameters, for any node (e.g. '/controller_node').
+        """
         from rcl_interfaces.srv import SetParameters
         from rclpy.parameter import Parameter
-        request = SetParameters.Request(parameters=[Parameter(k, value=v).to_parameter_msg()
-                                                    for k, v in values.items()])
-        results = list(self.call(self._parameter_client(node_name, 'set_parameters'), request).results)
+
+        request = SetParameters.Request(
+            parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
+        )
+        results = list(
+            self.call(self._parameter_client(node_name, 'set_parameters'), request).results
+        )
         if check:
             bad = [f'{name}: {r.reason}' for name, r in zip(values, results) if not r.successful]
             if bad:
@@ -476,12 +608,16 @@ class SimHarness:
     def get_parameters(self, *names: str, node_name: str = SIM_NODE_NAME) -> dict:
         from rcl_interfaces.srv import GetParameters
         from rclpy.parameter import parameter_value_to_python
-        response = self.call(self._parameter_client(node_name, 'get_parameters'),
-                             GetParameters.Request(names=list(names)))
+
+        response = self.call(
+            self._parameter_client(node_name, 'get_parameters'),
+            GetParameters.Request(names=list(names)),
+        )
         return {n: parameter_value_to_python(v) for n, v in zip(names, response.values)}
 
     def _parameter_client(self, node_name: str, service: str) -> str:
         from rcl_interfaces.srv import GetParameters, SetParameters
+
         key = f'{node_name}/{service}'
         if key not in self._clients:
             kind = SetParameters if service == 'set_parameters' else GetParameters

@@ -1,7 +1,11 @@
-"""The interface of the pulsejet nodes in one place: topic, service and status names, types, field
-names and thresholds. No ROS import, so the ROS-free engine and offline tools use the same names;
-`pulsejet_sim.messages` builds the messages. Topic names are relative (the node namespace applies),
-except `/clock` and `/diagnostics`."""
+"""
+The interface of the pulsejet nodes in one place.
+
+Topic, service and status names, types, field names and thresholds. No ROS import, so the ROS-free
+engine and offline tools use the same names; `pulsejet_sim.messages` builds the messages. Topic
+names are relative (the node namespace applies), except `/clock` and `/diagnostics`.
+"""
+
 from __future__ import annotations
 
 FRAME_ID = 'pulsejet/body'
@@ -56,13 +60,23 @@ TOPIC_TYPES: dict[str, str] = {
     TOPIC_APPLIED_COMMAND: 'sensor_msgs/msg/JointState',
     TOPIC_MANTLE_PROFILE: 'geometry_msgs/msg/PolygonStamped',
 }
-STATE_TOPICS = (TOPIC_MANTLE_RADIUS, TOPIC_VOLUME, TOPIC_VELOCITY, TOPIC_THRUST, TOPIC_FLUID_MASS, TOPIC_ODOMETRY,
-                TOPIC_CLOCK)
+STATE_TOPICS = (
+    TOPIC_MANTLE_RADIUS,
+    TOPIC_VOLUME,
+    TOPIC_VELOCITY,
+    TOPIC_THRUST,
+    TOPIC_FLUID_MASS,
+    TOPIC_ODOMETRY,
+    TOPIC_CLOCK,
+)
 COMMAND_TOPICS = (TOPIC_CMD_PUMP_FLOW, TOPIC_CMD_VALVE, TOPIC_CMD_CABLE_FORCE)
 #: per-actuator command topic -> Command field
-COMMAND_FIELDS = {TOPIC_CMD_PUMP_FLOW: 'pump_flow_m3_s', TOPIC_CMD_VALVE: 'valve_opening',
-                  TOPIC_CMD_CABLE_FORCE: 'cable_force_n'}
+COMMAND_FIELDS = {
+    TOPIC_CMD_PUMP_FLOW: 'pump_flow_m3_s',
+    TOPIC_CMD_VALVE: 'valve_opening',
+    TOPIC_CMD_CABLE_FORCE: 'cable_force_n',
+}
 
 LEDGER_STATUS_NAME = 'pulsejet energy ledger'
 LEDGER_HARDWARE_ID = 'pulsejet'
-LEDGER_WARN_RELATIVE = 0.05   # |closure_relative| above this -> WARN: energy books do not balance
+LEDGER_WARN_RELATIVE = 0.05  # |closure_relative| above this -> WARN: energy books do not balance

@@ -1,9 +1,11 @@
-"""Simulation values -> ROS 2 messages, one function per kind of data.
+"""
+Simulation values -> ROS 2 messages, one function per kind of data.
 
 sim_node (live) and the offline runner both build their messages here, so live and offline
 recordings carry the same topics, types, frames and stamps. Topic names are relative (the node
 namespace applies), except `/clock`. Every header is stamped with simulation time.
 """
+
 from __future__ import annotations
 
 import math
@@ -13,62 +15,68 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Point32, PolygonStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Odometry
-from visualization_msgs.msg import Marker
+from pulsejet_sim.interface import (  # noqa: F401  (re-exported: the names of every message)
+    APPLIED_COMMAND_NAMES,
+    BASE_FRAME_ID,
+    COMMAND_FIELDS,
+    COMMAND_TOPICS,
+    FRAME_ID,
+    LEDGER_HARDWARE_ID,
+    LEDGER_STATUS_NAME,
+    LEDGER_WARN_RELATIVE,
+    MANTLE_MARKER_SEGMENTS,
+    ODOM_FRAME_ID,
+    SERVICE_PAUSE,
+    SERVICE_RESET,
+    SERVICE_STEP,
+    STATE_TOPICS,
+    TOPIC_APPLIED_COMMAND,
+    TOPIC_CLOCK,
+    TOPIC_CMD_CABLE_FORCE,
+    TOPIC_CMD_COMMAND,
+    TOPIC_CMD_PUMP_FLOW,
+    TOPIC_CMD_VALVE,
+    TOPIC_DIAGNOSTICS,
+    TOPIC_ENERGY_LEDGER,
+    TOPIC_FLUID_MASS,
+    TOPIC_MANTLE_MARKER,
+    TOPIC_MANTLE_PROFILE,
+    TOPIC_MANTLE_RADIUS,
+    TOPIC_ODOMETRY,
+    TOPIC_THRUST,
+    TOPIC_TYPES,
+    TOPIC_VELOCITY,
+    TOPIC_VOLUME,
+)
+from pulsejet_sim.models.base import Command, Observation
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
-
-from pulsejet_sim.models.base import Command, Observation
-
-from pulsejet_sim.interface import (  # noqa: F401  (re-exported: the names of every message)
-    FRAME_ID,
-    TOPIC_MANTLE_RADIUS,
-    TOPIC_VOLUME,
-    TOPIC_VELOCITY,
-    TOPIC_THRUST,
-    TOPIC_ENERGY_LEDGER,
-    TOPIC_FLUID_MASS,
-    TOPIC_CLOCK,
-    TOPIC_ODOMETRY,
-    TOPIC_MANTLE_MARKER,
-    MANTLE_MARKER_SEGMENTS,
-    ODOM_FRAME_ID,
-    BASE_FRAME_ID,
-    TOPIC_CMD_PUMP_FLOW,
-    TOPIC_CMD_VALVE,
-    TOPIC_CMD_CABLE_FORCE,
-    TOPIC_CMD_COMMAND,
-    TOPIC_DIAGNOSTICS,
-    SERVICE_PAUSE,
-    SERVICE_STEP,
-    SERVICE_RESET,
-    TOPIC_APPLIED_COMMAND,
-    TOPIC_MANTLE_PROFILE,
-    APPLIED_COMMAND_NAMES,
-    TOPIC_TYPES,
-    STATE_TOPICS,
-    COMMAND_TOPICS,
-    COMMAND_FIELDS,
-    LEDGER_STATUS_NAME,
-    LEDGER_HARDWARE_ID,
-    LEDGER_WARN_RELATIVE)
+from visualization_msgs.msg import Marker
 
 
 def message_class(topic: str) -> type:
-    """The rclpy message class of a topic in TOPIC_TYPES; ValueError names an unknown topic."""
-    classes = {'std_msgs/msg/Float64': Float64, 'geometry_msgs/msg/TwistStamped': TwistStamped,
-               'geometry_msgs/msg/WrenchStamped': WrenchStamped, 'rosgraph_msgs/msg/Clock': Clock,
-               'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray,
-               'sensor_msgs/msg/JointState': JointState, 'nav_msgs/msg/Odometry': Odometry,
-               'geometry_msgs/msg/PolygonStamped': PolygonStamped}
+    """Return the rclpy message class of a TOPIC_TYPES topic; ValueError names an unknown one."""
+    classes = {
+        'std_msgs/msg/Float64': Float64,
+        'geometry_msgs/msg/TwistStamped': TwistStamped,
+        'geometry_msgs/msg/WrenchStamped': WrenchStamped,
+        'rosgraph_msgs/msg/Clock': Clock,
+        'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray,
+        'sensor_msgs/msg/JointState': JointState,
+        'nav_msgs/msg/Odometry': Odometry,
+        'geometry_msgs/msg/PolygonStamped': PolygonStamped,
+    }
     try:
         return classes[TOPIC_TYPES[topic]]
     except KeyError:
-        raise ValueError(f'topic {topic!r} is not a pulsejet topic; allowed: {sorted(TOPIC_TYPES)}') from None
+        raise ValueError(
+            f'topic {topic!r} is not a pulsejet topic; allowed: {sorted(TOPIC_TYPES)}'
+        ) from None
 
 
 def stamp(time_s: float) -> Time:
-    """Simulation time in s -> builtin_interfaces/Time (nanosecond resolution, rounded)."""
+    """Convert simulation time in s to builtin_interfaces/Time (nanosecond resolution, rounded)."""
     t = float(time_s)
     if not math.isfinite(t) or t < 0.0 or t >= 2.0**31:
         raise ValueError(f'time_s={time_s!r} rejected; allowed: a finite time in [0, 2^31) s')
@@ -77,7 +85,7 @@ def stamp(time_s: float) -> Time:
 
 
 def stamp_ns(time_s: float) -> int:
-    """Simulation time in s -> integer ns (the log time the offline runner should use)."""
+    """Convert simulation time in s to integer ns (the log time the offline runner should use)."""
     t = stamp(time_s)
     return t.sec * 1_000_000_000 + t.nanosec
 
@@ -86,10 +94,15 @@ def _float64(value: float) -> Float64:
     return Float64(data=float(value))
 
 
-def odometry_message(obs: Observation, odom_frame_id: str = ODOM_FRAME_ID,
-                     base_frame_id: str = BASE_FRAME_ID) -> Odometry:
-    """The body's pose (x = distance swum along the axis, m) in the odom frame and its twist
-    (linear.x = speed, m/s) in the body frame, stamped with simulation time (REP 105)."""
+def odometry_message(
+    obs: Observation, odom_frame_id: str = ODOM_FRAME_ID, base_frame_id: str = BASE_FRAME_ID
+) -> Odometry:
+    """
+    Return the body's pose in the odom frame and its twist in the body frame (REP 105).
+
+    Pose: x = distance swum along the axis, m; twist: linear.x = speed, m/s; stamped with
+    simulation time.
+    """
     msg = Odometry()
     msg.header.stamp = stamp(obs.time_s)
     msg.header.frame_id = odom_frame_id
@@ -100,9 +113,14 @@ def odometry_message(obs: Observation, odom_frame_id: str = ODOM_FRAME_ID,
     return msg
 
 
-def observation_messages(obs: Observation, frame_id: str = FRAME_ID, odom_frame_id: str = ODOM_FRAME_ID,
-                         base_frame_id: str = BASE_FRAME_ID) -> list[tuple[str, Any]]:
-    """(topic, message) for every state topic of one observation, stamped with obs.time_s.
+def observation_messages(
+    obs: Observation,
+    frame_id: str = FRAME_ID,
+    odom_frame_id: str = ODOM_FRAME_ID,
+    base_frame_id: str = BASE_FRAME_ID,
+) -> list[tuple[str, Any]]:
+    """
+    (topic, message) for every state topic of one observation, stamped with obs.time_s.
 
     Velocity goes in TwistStamped twist.linear.x (m/s), thrust in WrenchStamped wrench.force.x (N),
     both along the swimming axis (body x, forward +).
@@ -127,8 +145,11 @@ def observation_messages(obs: Observation, frame_id: str = FRAME_ID, odom_frame_
     ]
 
 
-def ledger_message(ledger: Mapping[str, float], time_s: float, frame_id: str = FRAME_ID) -> DiagnosticArray:
-    """Energy ledger (J) -> DiagnosticArray with one status `pulsejet energy ledger`.
+def ledger_message(
+    ledger: Mapping[str, float], time_s: float, frame_id: str = FRAME_ID
+) -> DiagnosticArray:
+    """
+    Energy ledger (J) -> DiagnosticArray with one status `pulsejet energy ledger`.
 
     One KeyValue per key, value = repr(float) so it parses back to the exact float. Level OK, or
     WARN when |closure_relative| > 5 % (or is not finite): the books do not balance; or WARN when
@@ -137,7 +158,9 @@ def ledger_message(ledger: Mapping[str, float], time_s: float, frame_id: str = F
     """
     closure = float(ledger.get('closure_relative', 0.0))
     created = sum(float(v) for k, v in ledger.items() if str(k).startswith('created_'))
-    energy_in = float(ledger.get('in_initial', 0.0)) + abs(float(ledger.get('in_actuation_work', 0.0)))
+    energy_in = float(ledger.get('in_initial', 0.0)) + abs(
+        float(ledger.get('in_actuation_work', 0.0))
+    )
     created_relative = created / max(energy_in, 1e-12)
     status = DiagnosticStatus()
     status.name = LEDGER_STATUS_NAME
@@ -147,8 +170,10 @@ def ledger_message(ledger: Mapping[str, float], time_s: float, frame_id: str = F
         status.message = f'energy closure {closure:+.2%} exceeds {LEDGER_WARN_RELATIVE:.0%}'
     elif abs(created_relative) > LEDGER_WARN_RELATIVE:
         status.level = DiagnosticStatus.WARN
-        status.message = (f'energy closure {closure:+.2%}, but the equations create {created:+.4g} J '
-                          f'({created_relative:+.0%} of the energy put in; created_* keys)')
+        status.message = (
+            f'energy closure {closure:+.2%}, but the equations create {created:+.4g} J '
+            f'({created_relative:+.0%} of the energy put in; created_* keys)'
+        )
     else:
         status.level = DiagnosticStatus.OK
         status.message = f'energy closure {closure:+.2%} (within {LEDGER_WARN_RELATIVE:.0%})'
@@ -171,7 +196,11 @@ def ledger_from_message(msg: Any) -> dict[str, float]:
 
 
 def command_messages(cmd: Command) -> list[tuple[str, Float64]]:
-    """(topic, Float64) for each actuator command: pump flow m^3/s, valve opening 0..1, cable force N."""
+    """
+    Return (topic, Float64) for each actuator command.
+
+    Pump flow m^3/s, valve opening 0..1, cable force N.
+    """
     return [
         (TOPIC_CMD_PUMP_FLOW, _float64(cmd.pump_flow_m3_s)),
         (TOPIC_CMD_VALVE, _float64(cmd.valve_opening)),
@@ -180,46 +209,74 @@ def command_messages(cmd: Command) -> list[tuple[str, Float64]]:
 
 
 def applied_command_message(cmd: Command, time_s: float, frame_id: str = FRAME_ID) -> JointState:
-    """The command held from time_s (simulation time) on: JointState with names
-    APPLIED_COMMAND_NAMES and the values in `position` (m^3/s, 0..1, N)."""
+    """
+    Return the command held from time_s (simulation time) on.
+
+    A JointState with names APPLIED_COMMAND_NAMES and the values in `position` (m^3/s, 0..1, N).
+    """
     msg = JointState()
     msg.header.stamp = stamp(time_s)
     msg.header.frame_id = frame_id
     msg.name = list(APPLIED_COMMAND_NAMES)
     msg.position = [float(cmd.pump_flow_m3_s), float(cmd.valve_opening), float(cmd.cable_force_n)]
-    # Filled, not empty: rosbags (0.11) misreads the padding rclpy writes for empty trailing float64 sequences.
+    # Filled, not empty: rosbags (0.11) misreads the padding rclpy writes for empty trailing
+    # float64 sequences.
     msg.velocity = [0.0] * len(APPLIED_COMMAND_NAMES)
     msg.effort = [0.0] * len(APPLIED_COMMAND_NAMES)
     return msg
 
 
 def command_message(cmd: Command, time_s: float, frame_id: str = FRAME_ID) -> JointState:
-    """The atomic command (TOPIC_CMD_COMMAND) answering the state at time_s: every actuator at once."""
+    """
+    Return the atomic command (TOPIC_CMD_COMMAND) answering the state at time_s.
+
+    It carries every actuator at once.
+    """
     return applied_command_message(cmd, time_s, frame_id)
 
 
 def command_values(msg: Any) -> tuple[float, dict[str, float]]:
-    """An atomic command message -> (stamp in s, {field: value}); ValueError names what is wrong."""
+    """
+    Parse an atomic command message into (stamp in s, {field: value}).
+
+    ValueError names what is wrong.
+    """
     names, values = list(msg.name), list(msg.position)
     if len(names) != len(values) or not names:
-        raise ValueError(f'{len(names)} names and {len(values)} positions; allowed: the same number, at least '
-                         f'one, names from {", ".join(APPLIED_COMMAND_NAMES)}')
+        raise ValueError(
+            f'{len(names)} names and {len(values)} positions; allowed: the same number, at least '
+            f'one, names from {", ".join(APPLIED_COMMAND_NAMES)}'
+        )
     unknown = [n for n in names if n not in APPLIED_COMMAND_NAMES]
     if unknown or len(set(names)) != len(names):
-        raise ValueError(f'names {names!r}; allowed: distinct names from {", ".join(APPLIED_COMMAND_NAMES)}')
-    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, dict(zip(names, (float(v) for v in values)))
+        raise ValueError(
+            f'names {names!r}; allowed: distinct names from {", ".join(APPLIED_COMMAND_NAMES)}'
+        )
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, dict(
+        zip(names, (float(v) for v in values))
+    )
 
 
 def command_from_applied(msg: Any) -> tuple[float, Command]:
-    """Inverse of applied_command_message (rclpy or decoded-from-bag message): (time_s, Command)."""
+    """
+    Return (time_s, Command) of an applied command message: inverse of applied_command_message.
+
+    The message is an rclpy one or one decoded from a bag.
+    """
     values = dict(zip(msg.name, msg.position))
     time_s = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-    return time_s, Command(values['pump_flow_m3_s'], values['valve_opening'], values['cable_force_n'])
+    return time_s, Command(
+        values['pump_flow_m3_s'], values['valve_opening'], values['cable_force_n']
+    )
 
 
 def profile_message(r_m, z_m, time_s: float, frame_id: str = FRAME_ID) -> PolygonStamped:
-    """Mantle meridian (node radii r_m and axial positions z_m, m) as a PolygonStamped in the
-    body's x (axial, forward +) / y (radial) plane."""
+    """
+    Return the mantle meridian as a PolygonStamped.
+
+    Node radii r_m and axial positions z_m (m), in the body's x (axial, forward +) / y (radial)
+    plane.
+    """
     msg = PolygonStamped()
     msg.header.stamp = stamp(time_s)
     msg.header.frame_id = frame_id
@@ -227,11 +284,17 @@ def profile_message(r_m, z_m, time_s: float, frame_id: str = FRAME_ID) -> Polygo
     return msg
 
 
-def mantle_marker(r_m, z_m, time_s: float, frame_id: str = FRAME_ID,
-                  segments: int = MANTLE_MARKER_SEGMENTS) -> Marker:
-    """The mantle surface as a Marker TRIANGLE_LIST: the meridian (node radii r_m, axial positions
-    z_m, m) revolved about the body's x axis in `segments` facets, two triangles per element and facet."""
+def mantle_marker(
+    r_m, z_m, time_s: float, frame_id: str = FRAME_ID, segments: int = MANTLE_MARKER_SEGMENTS
+) -> Marker:
+    """
+    Return the mantle surface as a Marker TRIANGLE_LIST.
+
+    The meridian (node radii r_m, axial positions z_m, m) revolved about the body's x axis in
+    `segments` facets, two triangles per element and facet.
+    """
     import math as _m
+
     msg = Marker()
     msg.header.stamp = stamp(time_s)
     msg.header.frame_id = frame_id
@@ -243,8 +306,10 @@ def mantle_marker(r_m, z_m, time_s: float, frame_id: str = FRAME_ID,
     msg.scale.x = msg.scale.y = msg.scale.z = 1.0
     msg.color.r, msg.color.g, msg.color.b, msg.color.a = 0.95, 0.55, 0.35, 0.8
     angles = [2.0 * _m.pi * k / segments for k in range(segments + 1)]
-    ring = [[Point(x=float(z), y=float(r) * _m.cos(a), z=float(r) * _m.sin(a)) for a in angles]
-            for r, z in zip(r_m, z_m)]
+    ring = [
+        [Point(x=float(z), y=float(r) * _m.cos(a), z=float(r) * _m.sin(a)) for a in angles]
+        for r, z in zip(r_m, z_m)
+    ]
     points = []
     for lower, upper in zip(ring, ring[1:]):
         for k in range(segments):

@@ -1,9 +1,11 @@
-"""The process life of a pulsejet node: rclpy start-up, SIGINT/SIGTERM, spinning, exit codes.
+"""
+The process life of a pulsejet node: rclpy start-up, SIGINT/SIGTERM, spinning, exit codes.
 
 sim_node and controller_node share it so that both stop the same way: a signal ends the spin loop
 (rclpy's own handlers are off, so the node can log and close cleanly), a bad scene or parameter is
 one clear line and exit code 2, and a bug keeps its traceback.
 """
+
 from __future__ import annotations
 
 import signal
@@ -23,7 +25,8 @@ DRAIN_S = 0.3
 
 
 def run_node(name: str, make_node: Callable[[], Node], args=None) -> int:
-    """Create the node, spin until a signal or until ``node.done``, then close it.
+    """
+    Create the node, spin until a signal or until ``node.done``, then close it.
 
     Optional hooks on the node: ``start()`` after it joined the executor, ``done`` (bool),
     ``exit_code`` (int, default 0), ``on_stop(signum or None)`` before closing, ``close()``.
@@ -60,10 +63,10 @@ def run_node(name: str, make_node: Callable[[], Node], args=None) -> int:
             node.on_stop(stop['signal'])
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ValueError, ParameterException) as exc:   # bad scene or parameter: one clear line
+    except (ValueError, ParameterException) as exc:  # bad scene or parameter: one clear line
         print(f'{name}: error: {type(exc).__name__}: {exc}', file=sys.stderr, flush=True)
         code = 2
-    except Exception as exc:   # a bug: keep the traceback
+    except Exception as exc:  # a bug: keep the traceback
         traceback.print_exc()
         print(f'{name}: error: {type(exc).__name__}: {exc}', file=sys.stderr, flush=True)
         code = 2

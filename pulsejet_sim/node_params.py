@@ -1,5 +1,8 @@
-"""Node parameters and command lines: one table entry per parameter (default, description, range,
-read-only), the check that a live change must pass, and the `--ros-args` form of a value.
+"""
+Node parameters and command lines.
+
+One table entry per parameter (default, description, range, read-only), the check that a live
+change must pass, and the `--ros-args` form of a value.
 
 Shared by sim_node, controller_node, recorder and replay (declaration and on-set validation) and by
 everything that starts a node as a process (the demo, the harness, tests, benchmarks).
@@ -8,19 +11,30 @@ Structured scene overrides: sim_node takes every parameter named `scene.<section
 `-p scene.geometry.nozzle_radius_m:=0.01` or a params file, where a nested `scene:` mapping is
 flattened by rcl to the same names) as an override of that scene key (`scene_overrides` below).
 """
+
 from __future__ import annotations
 
 import dataclasses
 import math
 import sys
 
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
-                                SetParametersResult)
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
 
 
 @dataclasses.dataclass(frozen=True)
 class ParamSpec:
-    """One parameter: its default, description, type and allowed values (declared from this table)."""
+    """
+    One parameter: its default, description, type and allowed values.
+
+    Declared from this table.
+    """
+
     name: str
     default: object
     description: str
@@ -28,8 +42,8 @@ class ParamSpec:
     high: float | None = None
     choices: tuple[str, ...] | None = None
     read_only: bool = False
-    allowed: str | None = None   # wording of the allowed values when the range alone is not enough
-    dynamic: bool = False        # any type accepted by rclpy: the node checks the value itself
+    allowed: str | None = None  # wording of the allowed values when the range alone is not enough
+    dynamic: bool = False  # any type accepted by rclpy: the node checks the value itself
 
     def allowed_text(self) -> str:
         if self.allowed:
@@ -39,27 +53,35 @@ class ParamSpec:
         if isinstance(self.default, (list, tuple)):
             return 'a list of strings'
         if self.low is not None:
-            kind = 'a whole number' if isinstance(self.default, int) and not isinstance(self.default, bool) \
+            kind = (
+                'a whole number'
+                if isinstance(self.default, int) and not isinstance(self.default, bool)
                 else 'a number'
+            )
             return f'{kind} in [{self.low:g}, {self.high:g}]'
         if isinstance(self.default, bool):
             return 'true or false'
         return 'a string'
 
     def descriptor(self) -> ParameterDescriptor:
-        d = ParameterDescriptor(description=f'{self.description}; allowed: {self.allowed_text()}',
-                                read_only=self.read_only)
+        d = ParameterDescriptor(
+            description=f'{self.description}; allowed: {self.allowed_text()}',
+            read_only=self.read_only,
+        )
         if isinstance(self.default, bool):
             d.type = ParameterType.PARAMETER_BOOL
         elif isinstance(self.default, int):
             d.type = ParameterType.PARAMETER_INTEGER
-            d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)]
+            d.integer_range = [
+                IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)
+            ]
         elif isinstance(self.default, float):
             # doubles accept integers too (`real_time_factor:=2`): dynamically typed, checked in
             # the on-set callback (rclpy applies the range itself to double values)
             d.dynamic_typing = True
-            d.floating_point_range = [FloatingPointRange(from_value=float(self.low), to_value=float(self.high),
-                                                         step=0.0)]
+            d.floating_point_range = [
+                FloatingPointRange(from_value=float(self.low), to_value=float(self.high), step=0.0)
+            ]
         elif isinstance(self.default, (list, tuple)):
             d.type = ParameterType.PARAMETER_STRING_ARRAY
         else:
@@ -73,11 +95,19 @@ class ParamSpec:
         return d
 
     def check(self, value):
-        """The value converted (float for doubles), or ValueError naming the value and what is allowed."""
+        """
+        Return the value converted (float for doubles).
+
+        Raises ValueError naming the value and what is allowed.
+        """
         if isinstance(self.default, bool):
             ok = isinstance(value, bool)
         elif isinstance(self.default, int):
-            ok = isinstance(value, int) and not isinstance(value, bool) and self.low <= value <= self.high
+            ok = (
+                isinstance(value, int)
+                and not isinstance(value, bool)
+                and self.low <= value <= self.high
+            )
         elif isinstance(self.default, float):
             return check_number(self.name, value, self.low, self.high, self.allowed_text())
         elif isinstance(self.default, (list, tuple)):
@@ -85,24 +115,36 @@ class ParamSpec:
         else:
             ok = isinstance(value, str) and (self.choices is None or value in self.choices)
         if not ok:
-            raise ValueError(f'parameter {self.name}={value!r} rejected; allowed: {self.allowed_text()}')
+            raise ValueError(
+                f'parameter {self.name}={value!r} rejected; allowed: {self.allowed_text()}'
+            )
         return value
 
 
 def check_number(name, value, low, high, allowed=None) -> float:
-    """value (an int or float parameter) as float if finite and in [low, high]; else ValueError."""
+    """
+    Return value (an int or float parameter) as float if finite and in [low, high].
+
+    Else ValueError.
+    """
     ok = isinstance(value, (int, float)) and not isinstance(value, bool)
     if ok:
         value = float(value)
         ok = math.isfinite(value) and low <= value <= high
     if not ok:
-        raise ValueError(f'parameter {name}={value!r} rejected; allowed: {allowed or f"a number in [{low:g}, {high:g}]"}')
+        raise ValueError(
+            f'parameter {name}={value!r} rejected; allowed: '
+            f'{allowed or f"a number in [{low:g}, {high:g}]"}'
+        )
     return value
 
 
 def check_parameters(params, specs) -> tuple[dict, SetParametersResult | None]:
-    """Check rclpy Parameters against their specs (unknown names pass through unchecked): the
-    converted values, or a rejection naming the first bad value and what is allowed."""
+    """
+    Check rclpy Parameters against their specs (unknown names pass through unchecked).
+
+    Returns the converted values, or a rejection naming the first bad value and what is allowed.
+    """
     checked = {}
     for param in params:
         spec = specs.get(param.name)
@@ -119,56 +161,73 @@ SCENE_PREFIX = 'scene.'
 
 
 def scene_override_names(overrides) -> list[str]:
-    """The `scene.<key>` names among a node's parameter overrides (rclpy's `_parameter_overrides`:
-    command line, params files and constructor overrides), sorted."""
+    """
+    Return the `scene.<key>` names among a node's parameter overrides, sorted.
+
+    The overrides are rclpy's `_parameter_overrides`: command line, params files and constructor
+    overrides.
+    """
     return sorted(name for name in overrides if name.startswith(SCENE_PREFIX))
 
 
 def scene_override_descriptor(name: str) -> ParameterDescriptor:
     key = name[len(SCENE_PREFIX):]
     return ParameterDescriptor(
-        description=f'scene override: the value of scene key {key} (merged over the scene file and '
-                    'scene_overrides); allowed: what the scene schema allows for that key',
-        read_only=True, dynamic_typing=True)
+        description=f'scene override: the value of scene key {key} (merged over the scene file '
+                    'and '
+        'scene_overrides); allowed: what the scene schema allows for that key',
+        read_only=True,
+        dynamic_typing=True,
+    )
 
 
 def scene_overrides(values: dict) -> dict:
-    """{'scene.geometry.nozzle_radius_m': 0.01, ...} -> {'geometry': {'nozzle_radius_m': 0.01}}: the
-    nested mapping merged into the scene (the scene's own validation then refuses an unknown key
-    or a bad value, naming it). ValueError for a name with an empty part or a key given both as a
-    value and as a section."""
+    """
+    Nest the `scene.<key>` parameters into the mapping merged into the scene.
+
+    {'scene.geometry.nozzle_radius_m': 0.01, ...} -> {'geometry': {'nozzle_radius_m': 0.01}} (the
+    scene's own validation then refuses an unknown key or a bad value, naming it). ValueError for a
+    name with an empty part or a key given both as a value and as a section.
+    """
     out: dict = {}
-    origin: dict = {}     # key path -> parameter that set it (for a conflict message)
+    origin: dict = {}  # key path -> parameter that set it (for a conflict message)
     for name in sorted(values):
         parts = name[len(SCENE_PREFIX):].split('.')
         if not name.startswith(SCENE_PREFIX) or not all(parts):
-            raise ValueError(f'parameter {name!r} rejected; allowed: scene.<section>.<key>, e.g. '
-                             'scene.geometry.nozzle_radius_m')
+            raise ValueError(
+                f'parameter {name!r} rejected; allowed: scene.<section>.<key>, e.g. '
+                'scene.geometry.nozzle_radius_m'
+            )
         value = values[name]
-        if not isinstance(value, (bool, int, float, str)):   # an rclpy array: a plain list
+        if not isinstance(value, (bool, int, float, str)):  # an rclpy array: a plain list
             value = list(value)
         node = out
         for i, part in enumerate(parts[:-1]):
-            path = tuple(parts[:i + 1])
+            path = tuple(parts[: i + 1])
             if path in origin:
-                raise ValueError(f'parameter {name}={value!r} conflicts with {origin[path]}: '
-                                 f'{".".join(path)} cannot be both a value and a section')
+                raise ValueError(
+                    f'parameter {name}={value!r} conflicts with {origin[path]}: '
+                    f'{".".join(path)} cannot be both a value and a section'
+                )
             node = node.setdefault(part, {})
-        node[parts[-1]] = value   # sorted: a key's own value comes before its sub-keys
+        node[parts[-1]] = value  # sorted: a key's own value comes before its sub-keys
         origin[tuple(parts)] = name
     return out
 
 
 def ros_value(value) -> str:
-    """A --ros-args value: doubles always parse as doubles, strings as strings."""
+    """Format a --ros-args value: doubles always parse as doubles, strings as strings."""
     if isinstance(value, bool):
         return 'true' if value else 'false'
     if isinstance(value, float):
         s = repr(value)
         return format(value, '.12f') if ('e' in s or 'n' in s) else s
     if isinstance(value, str):
-        return value if value and all(c.isalnum() or c in '_./-' for c in value) and not value[0].isdigit() \
+        return (
+            value
+            if value and all(c.isalnum() or c in '_./-' for c in value) and not value[0].isdigit()
             else "'" + value.replace("'", "\\'") + "'"
+        )
     return str(value)
 
 

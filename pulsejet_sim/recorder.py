@@ -1,9 +1,11 @@
-"""ROS 2 node `recorder`: write subscribed topics to one MCAP file (rosbag2 layout) as they arrive.
+r"""
+ROS 2 node `recorder`: write subscribed topics to one MCAP file (rosbag2 layout) as they arrive.
 
 Messages are taken raw (CDR bytes, no deserialization) and logged with their receive time (system
 clock, ns), like `ros2 bag record`; analysis uses the simulation-time header stamps inside them.
 
-    ros2 run pulsejet_sim recorder --ros-args -p output:=runs/x.mcap -p topics:="['pulsejet/velocity']"
+    ros2 run pulsejet_sim recorder --ros-args -p output:=runs/x.mcap \
+        -p topics:="['pulsejet/velocity']"
 
 Parameters (read-only, with descriptors: `ros2 param describe /recorder output`): `output` (path;
 default runs/<UTC date-time>.mcap), `topics` (string array; default every pulsejet topic incl.
@@ -11,38 +13,56 @@ commands, the energy ledger and /clock; an entry may be `name:pkg/msg/Type` for 
 pulsejet set). On SIGINT/SIGTERM the file is closed complete and its path printed.
 `Recorder(node, path, topics)` does the same inside another process's node.
 """
+
 from __future__ import annotations
 
 import datetime
 import importlib
+from pathlib import Path
 import sys
 import time
-from pathlib import Path
 from typing import Iterable, Sequence
-
-from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from pulsejet_sim import messages
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.writer import BagError, BagWriter, qos_profiles_yaml
 from pulsejet_sim.node_params import ParamSpec
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 # State and command topics: reliable and deep, so a burst from a fast simulation is not dropped.
-STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                       reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+STATE_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 # /clock: best effort matches both best-effort and reliable publishers (a reliable subscription
 # would not match a best-effort clock publisher).
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                       reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
-FLUSH_PERIOD_S = 1.0   # an idle recorder still pushes its last chunk to disk within this time
+CLOCK_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)
+FLUSH_PERIOD_S = 1.0  # an idle recorder still pushes its last chunk to disk within this time
 # read-only: the file and its topics are fixed at start-up
 PARAMETERS = (
-    ParamSpec('output', '', 'MCAP file to write (rosbag2 layout); empty = runs/<UTC date-time>.mcap',
-              read_only=True, allowed='a file path or empty'),
-    ParamSpec('topics', tuple(messages.TOPIC_TYPES), 'topics to record: pulsejet topic names, or '
-              '"name:pkg/msg/Type" for any other topic; default every pulsejet topic and /clock',
-              read_only=True, allowed='a list of topic names or "name:pkg/msg/Type" entries'),
+    ParamSpec(
+        'output',
+        '',
+        'MCAP file to write (rosbag2 layout); empty = runs/<UTC date-time>.mcap',
+        read_only=True,
+        allowed='a file path or empty',
+    ),
+    ParamSpec(
+        'topics',
+        tuple(messages.TOPIC_TYPES),
+        'topics to record: pulsejet topic names, or '
+        '"name:pkg/msg/Type" for any other topic; default every pulsejet topic and /clock',
+        read_only=True,
+        allowed='a list of topic names or "name:pkg/msg/Type" entries',
+    ),
 )
 
 
@@ -53,36 +73,53 @@ def default_output(now: datetime.datetime | None = None) -> Path:
 
 
 def parse_topics(entries: Iterable[str]) -> dict[str, str]:
-    """Topic entries -> {topic: type name}. An entry is a pulsejet topic ('pulsejet/velocity',
-    '/pulsejet/velocity', '/clock') or 'name:pkg/msg/Type'. ValueError names a bad entry."""
+    """
+    Map topic entries to {topic: type name}.
+
+    An entry is a pulsejet topic ('pulsejet/velocity', '/pulsejet/velocity', '/clock') or
+    'name:pkg/msg/Type'. ValueError names a bad entry.
+    """
     out: dict[str, str] = {}
     for entry in entries:
         if not isinstance(entry, str) or not entry.strip():
-            raise ValueError(f'topic entry {entry!r} is empty; expected a topic name or "name:pkg/msg/Type"')
+            raise ValueError(
+                f'topic entry {entry!r} is empty; expected a topic name or "name:pkg/msg/Type"'
+            )
         name, sep, type_name = entry.strip().partition(':')
         if sep:
             msgdefs.split_type_name(type_name)
         else:
-            type_name = messages.TOPIC_TYPES.get(name) or messages.TOPIC_TYPES.get(name.lstrip('/'), '')
+            type_name = messages.TOPIC_TYPES.get(name) or messages.TOPIC_TYPES.get(
+                name.lstrip('/'), ''
+            )
             if not type_name:
-                raise ValueError(f'topic {name!r} is not a pulsejet topic and has no type; allowed: '
-                                 f'{sorted(messages.TOPIC_TYPES)} or "name:pkg/msg/Type"')
+                raise ValueError(
+                    f'topic {name!r} is not a pulsejet topic and has no type; allowed: '
+                    f'{sorted(messages.TOPIC_TYPES)} or "name:pkg/msg/Type"'
+                )
         out[name] = type_name
     return out
 
 
 def import_message_class(type_name: str) -> type:
-    """'pkg/msg/Type' -> the generated rclpy class; ValueError names a type that is not installed."""
+    """
+    Return the generated rclpy class of 'pkg/msg/Type'.
+
+    ValueError names a type that is not installed.
+    """
     package, namespace, name = msgdefs.split_type_name(type_name)
     try:
         return getattr(importlib.import_module(f'{package}.{namespace}'), name)
     except (ImportError, AttributeError):
-        raise ValueError(f'message type {type_name!r} is not installed '
-                         f'(no class {name} in Python module {package}.{namespace})') from None
+        raise ValueError(
+            f'message type {type_name!r} is not installed '
+            f'(no class {name} in Python module {package}.{namespace})'
+        ) from None
 
 
 class Recorder:
-    """Subscribe raw to `topics` on `node` and write every message to `path` until close().
+    """
+    Subscribe raw to `topics` on `node` and write every message to `path` until close().
 
     topics: entries as for parse_topics; None = every topic in messages.TOPIC_TYPES. Topic names
     are resolved in the node's namespace and recorded fully qualified. A topic appears in the file
@@ -100,7 +137,10 @@ class Recorder:
             qos = CLOCK_QOS if resolved == '/clock' else STATE_QOS
             callback = self._make_callback(resolved, type_name)
             self._subscriptions.append(
-                node.create_subscription(import_message_class(type_name), name, callback, qos, raw=True))
+                node.create_subscription(
+                    import_message_class(type_name), name, callback, qos, raw=True
+                )
+            )
         self._timer = node.create_timer(FLUSH_PERIOD_S, self.writer.flush_if_due)
 
     def _make_callback(self, topic: str, type_name: str):
@@ -109,12 +149,15 @@ class Recorder:
             try:
                 if topic not in self.writer.topics:
                     infos = self.node.get_publishers_info_by_topic(topic)
-                    self.writer.add_topic(topic, type_name, qos_profiles_yaml(i.qos_profile for i in infos))
+                    self.writer.add_topic(
+                        topic, type_name, qos_profiles_yaml(i.qos_profile for i in infos)
+                    )
                 self.writer.write(topic, data, receive_ns)
             except BagError:
                 if not self.writer.closed:
                     raise
                 # else: delivered by an executor thread while close() ran; recording has ended
+
         return on_message
 
     @property
@@ -139,9 +182,14 @@ def main(args: list[str] | None = None) -> int:
 
     rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that make spin() return
     node = Node('recorder')
-    values = {spec.name: node.declare_parameter(spec.name, list(spec.default) if isinstance(spec.default, tuple)
-                                                else spec.default, spec.descriptor()).value
-              for spec in PARAMETERS}
+    values = {
+        spec.name: node.declare_parameter(
+            spec.name,
+            list(spec.default) if isinstance(spec.default, tuple) else spec.default,
+            spec.descriptor(),
+        ).value
+        for spec in PARAMETERS
+    }
     output = values['output'] or str(default_output())
     topics = list(values['topics'] or messages.TOPIC_TYPES)
     try:

@@ -1,14 +1,18 @@
-"""Offline runner: the same model, Simulation.step and routine as the live nodes, as fast as the
-machine allows, no DDS; writes the same topics to MCAP (log time = simulation time).
+"""
+Offline runner: the same model, Simulation.step and routine as the live nodes, without DDS.
+
+It runs as fast as the machine allows and writes the same topics to MCAP (log time = simulation
+time).
 
 `Drive` is the loop itself (no ROS): the MCAP runner and `pulsejet sweep` both iterate it.
 """
+
 from __future__ import annotations
 
-import math
-import threading
 from dataclasses import dataclass, field
+import math
 from pathlib import Path
+import threading
 from typing import Iterator
 
 from pulsejet_ctrl.routines import routine_from_scene
@@ -16,7 +20,7 @@ from pulsejet_sim.models.base import Command, Observation, SimulationBlowUp
 from pulsejet_sim.scene import Scene
 from pulsejet_sim.simulation import Simulation
 
-LEDGER_PERIOD_S = 0.2   # energy ledger messages at 5 Hz, as sim_node publishes them
+LEDGER_PERIOD_S = 0.2  # energy ledger messages at 5 Hz, as sim_node publishes them
 
 
 def steps_per_publication(scene: Scene) -> int:
@@ -25,10 +29,13 @@ def steps_per_publication(scene: Scene) -> int:
 
 @dataclass
 class Drive:
-    """Steps a scene in publication-sized batches, each command from the scene's routine (or the
-    scene's initial command), like sim_node + controller_node at an ideal rate. Iterating yields
+    """
+    Steps a scene in publication-sized batches, like sim_node + controller_node at an ideal rate.
+
+    Each command comes from the scene's routine (or the scene's initial command). Iterating yields
     (time_s at the batch start, command held, observation after the batch); a blow-up ends the
-    iteration and is kept in `fault`."""
+    iteration and is kept in `fault`.
+    """
 
     scene: Scene
     duration_s: float
@@ -37,20 +44,27 @@ class Drive:
 
     def __post_init__(self):
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
-            raise ValueError(f'duration_s={self.duration_s!r} rejected; allowed: a positive finite number of seconds')
+            raise ValueError(
+                f'duration_s={self.duration_s!r} rejected; allowed: a positive finite number of '
+                'seconds'
+            )
         self.sim = Simulation(self.scene.model)
         self.routine = routine_from_scene(self.scene.routine)
         self.batch = steps_per_publication(self.scene)
-        self.batches = int(math.ceil(self.duration_s / (self.batch * self.scene.model.dt_s) - 1e-9))
+        self.batches = int(
+            math.ceil(self.duration_s / (self.batch * self.scene.model.dt_s) - 1e-9)
+        )
 
     def __iter__(self) -> Iterator[tuple[float, Command, Observation]]:
         obs = self.sim.observe()
         for _ in range(self.batches):
             start_s = self.sim.time_s
-            command = self.routine.command(start_s, obs.volume_m3) if self.routine else self.sim.command
+            command = (
+                self.routine.command(start_s, obs.volume_m3) if self.routine else self.sim.command
+            )
             try:
                 obs = self.sim.step(self.batch, command)
-            except SimulationBlowUp as err:   # stop, keep what was good
+            except SimulationBlowUp as err:  # stop, keep what was good
                 self.fault = str(err)
                 return
             yield start_s, command, obs
@@ -64,10 +78,15 @@ class RunResult:
     fault: str | None
 
 
-def run_scene(scene: Scene, duration_s: float | None = None, out: str | Path | None = None) -> RunResult:
-    """Run `scene` for duration_s of simulated time (default: the scene's), writing MCAP to `out`
-    if given. A blow-up ends the run early: the file keeps everything before it, and the fault is
-    returned (never a NaN message)."""
+def run_scene(
+    scene: Scene, duration_s: float | None = None, out: str | Path | None = None
+) -> RunResult:
+    """
+    Run `scene` for duration_s of simulated time (default: the scene's), writing MCAP to `out`.
+
+    The file is written only if `out` is given. A blow-up ends the run early: the file keeps
+    everything before it, and the fault is returned (never a NaN message).
+    """
     drive = Drive(scene, scene.duration_s if duration_s is None else float(duration_s))
     if out is None:
         published = sum(1 for _ in drive)
@@ -76,20 +95,27 @@ def run_scene(scene: Scene, duration_s: float | None = None, out: str | Path | N
 
 
 def _record(drive: Drive, out: Path) -> RunResult:
-    import yaml
-
     from pulsejet_sim import messages
     from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
+    import yaml
 
     sim, scene = drive.sim, drive.scene
     ledger_every = max(1, int(round(LEDGER_PERIOD_S / (drive.batch * scene.model.dt_s))))
     writer = BagWriter(out)
     # the scene travels with the recording, so `pulsejet resim FILE` needs nothing else
-    writer.add_metadata('pulsejet', {'scene': scene.name, 'scene_yaml': yaml.safe_dump(
-        dict(scene.data, name=scene.name), sort_keys=False)})
+    writer.add_metadata(
+        'pulsejet',
+        {
+            'scene': scene.name,
+            'scene_yaml': yaml.safe_dump(dict(scene.data, name=scene.name), sort_keys=False),
+        },
+    )
     # Ctrl-C or SIGTERM during a long offline run still leaves a complete, readable file
-    restore_signals = (install_signal_handlers(writer)
-                       if threading.current_thread() is threading.main_thread() else None)
+    restore_signals = (
+        install_signal_handlers(writer)
+        if threading.current_thread() is threading.main_thread()
+        else None
+    )
 
     def write_state(obs: Observation, ledger: bool) -> None:
         ns = messages.stamp_ns(obs.time_s)
@@ -97,9 +123,15 @@ def _record(drive: Drive, out: Path) -> RunResult:
             writer.write_message(topic, msg, ns)
         profile = sim.profile()
         if profile is not None:
-            writer.write_message(messages.TOPIC_MANTLE_PROFILE, messages.profile_message(*profile, obs.time_s), ns)
+            writer.write_message(
+                messages.TOPIC_MANTLE_PROFILE, messages.profile_message(*profile, obs.time_s), ns
+            )
         if ledger:
-            writer.write_message(messages.TOPIC_ENERGY_LEDGER, messages.ledger_message(sim.energy_ledger(), obs.time_s), ns)
+            writer.write_message(
+                messages.TOPIC_ENERGY_LEDGER,
+                messages.ledger_message(sim.energy_ledger(), obs.time_s),
+                ns,
+            )
 
     published = 0
     last_applied = None
@@ -110,7 +142,11 @@ def _record(drive: Drive, out: Path) -> RunResult:
             for topic, msg in messages.command_messages(command):
                 writer.write_message(topic, msg, ns)
             if command != last_applied:
-                writer.write_message(messages.TOPIC_APPLIED_COMMAND, messages.applied_command_message(command, start_s), ns)
+                writer.write_message(
+                    messages.TOPIC_APPLIED_COMMAND,
+                    messages.applied_command_message(command, start_s),
+                    ns,
+                )
                 last_applied = command
             published += 1
             write_state(obs, ledger=published % ledger_every == 0 or published == drive.batches)
@@ -125,5 +161,6 @@ def _record(drive: Drive, out: Path) -> RunResult:
 
 def default_output(scene: Scene) -> Path:
     import datetime
+
     stamp = datetime.datetime.now().strftime('%Y%m%d-%H%M%S')
     return Path('runs') / f'{scene.name}-{stamp}.mcap'

@@ -1,4 +1,5 @@
-"""A small declarative checker for scene sections: every key known, every value typed and in range.
+"""
+A small declarative checker for scene sections: every key known, every value typed and in range.
 
 Errors name the key (dotted path), the bad value and what is allowed, so a user can fix a scene
 file from the message alone. Values are shown shortened (show()): a message never carries a
@@ -10,20 +11,20 @@ MAX_YAML_BYTES, and refused when its aliases expand to more than MAX_YAML_NODES 
 than MAX_YAML_DEPTH levels or refer to themselves (a "billion laughs" file would otherwise hang or
 exhaust memory in whatever walks the data).
 """
+
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 import reprlib
-from dataclasses import dataclass
 from typing import Any, Mapping
 
+from pulsejet_sim.models.base import ModelError
 import yaml
 
-from pulsejet_sim.models.base import ModelError
-
-MAX_YAML_BYTES = 1 << 20          # 1 MiB: a scene is a few kB, a sweep or fit some tens of kB
-MAX_YAML_NODES = 100_000          # values after alias expansion
-MAX_YAML_DEPTH = 64               # nesting levels
+MAX_YAML_BYTES = 1 << 20  # 1 MiB: a scene is a few kB, a sweep or fit some tens of kB
+MAX_YAML_NODES = 100_000  # values after alias expansion
+MAX_YAML_DEPTH = 64  # nesting levels
 
 _SHOW = reprlib.Repr()
 _SHOW.maxstring = 60
@@ -33,15 +34,23 @@ _SHOW.maxlevel = 3
 
 
 def show(value: Any) -> str:
-    """repr() of a value, shortened to a line (long strings, big or nested containers, recursion)."""
+    """
+    Return repr() of a value, shortened to a line.
+
+    Shortens long strings, big or nested containers, recursion.
+    """
     try:
         return _SHOW.repr(value)
-    except Exception:   # a value whose repr fails
+    except Exception:  # a value whose repr fails
         return f'<{type(value).__name__}>'
 
 
 class YAMLInputError(ValueError):
-    """A YAML text that is not valid, too large or too deeply aliased (the message names the file)."""
+    """
+    A YAML text that is not valid, too large or too deeply aliased.
+
+    The message names the file.
+    """
 
 
 def _children(node: yaml.Node) -> list[yaml.Node]:
@@ -64,45 +73,65 @@ def _check_graph(root: yaml.Node, what: str) -> None:
             on_path.discard(key)
             memo[key] = min(1 + sum(memo[id(c)] for c in _children(node)), MAX_YAML_NODES + 1)
             if memo[key] > MAX_YAML_NODES:
-                raise YAMLInputError(f'{what}: expands to more than {MAX_YAML_NODES} values through its '
-                                     f'aliases; allowed: a plain scene/sweep file (a YAML bomb is refused)')
+                raise YAMLInputError(
+                    f'{what}: expands to more than {MAX_YAML_NODES} values through its '
+                    f'aliases; allowed: a plain scene/sweep file (a YAML bomb is refused)'
+                )
             continue
         if key in memo:
             continue
         if key in on_path:
-            raise YAMLInputError(f'{what}: an alias refers to a value containing itself (line '
-                                 f'{node.start_mark.line + 1}); allowed: non-recursive YAML')
+            raise YAMLInputError(
+                f'{what}: an alias refers to a value containing itself (line '
+                f'{node.start_mark.line + 1}); allowed: non-recursive YAML'
+            )
         if depth > MAX_YAML_DEPTH:
-            raise YAMLInputError(f'{what}: nested deeper than {MAX_YAML_DEPTH} levels (line '
-                                 f'{node.start_mark.line + 1}); allowed: at most {MAX_YAML_DEPTH}')
+            raise YAMLInputError(
+                f'{what}: nested deeper than {MAX_YAML_DEPTH} levels (line '
+                f'{node.start_mark.line + 1}); allowed: at most {MAX_YAML_DEPTH}'
+            )
         on_path.add(key)
         stack.append((node, depth, True))
         for child in _children(node):
             if id(child) in on_path:
-                raise YAMLInputError(f'{what}: an alias refers to a value containing itself (line '
-                                     f'{child.start_mark.line + 1}); allowed: non-recursive YAML')
+                raise YAMLInputError(
+                    f'{what}: an alias refers to a value containing itself (line '
+                    f'{child.start_mark.line + 1}); allowed: non-recursive YAML'
+                )
             if id(child) not in memo:
                 stack.append((child, depth + 1, False))
 
 
 def safe_load_yaml(text: str | bytes, what: str) -> Any:
-    """Parse one YAML document with yaml.SafeLoader and the limits above; YAMLInputError names `what`."""
+    """
+    Parse one YAML document with yaml.SafeLoader and the limits above.
+
+    YAMLInputError names `what`.
+    """
     if isinstance(text, bytes):
         if len(text) > MAX_YAML_BYTES:
-            raise YAMLInputError(f'{what}: {len(text)} bytes; allowed: at most {MAX_YAML_BYTES} bytes of YAML')
+            raise YAMLInputError(
+                f'{what}: {len(text)} bytes; allowed: at most {MAX_YAML_BYTES} bytes of YAML'
+            )
         try:
             text = text.decode('utf-8')
         except UnicodeDecodeError as err:
-            raise YAMLInputError(f'{what}: not UTF-8 text (byte {err.start}); allowed: a UTF-8 YAML file') from None
+            raise YAMLInputError(
+                f'{what}: not UTF-8 text (byte {err.start}); allowed: a UTF-8 YAML file'
+            ) from None
     if not isinstance(text, str):
         raise YAMLInputError(f'{what}: {type(text).__name__} given; allowed: YAML text')
     if len(text) > MAX_YAML_BYTES:
-        raise YAMLInputError(f'{what}: {len(text)} characters; allowed: at most {MAX_YAML_BYTES} of YAML')
+        raise YAMLInputError(
+            f'{what}: {len(text)} characters; allowed: at most {MAX_YAML_BYTES} of YAML'
+        )
     try:
         loader = yaml.SafeLoader(text)
-    except yaml.YAMLError as err:   # the reader refuses control characters up front
+    except yaml.YAMLError as err:  # the reader refuses control characters up front
         detail = ' '.join(str(err).split())
-        raise YAMLInputError(f'{what}: not valid YAML ({detail[:300]}); allowed: one well-formed YAML document') from None
+        raise YAMLInputError(
+            f'{what}: not valid YAML ({detail[:300]}); allowed: one well-formed YAML document'
+        ) from None
     try:
         node = loader.get_single_node()
         if node is None:
@@ -111,9 +140,13 @@ def safe_load_yaml(text: str | bytes, what: str) -> Any:
         return loader.construct_document(node)
     except yaml.YAMLError as err:
         detail = ' '.join(str(err).split())
-        raise YAMLInputError(f'{what}: not valid YAML ({detail[:300]}); allowed: one well-formed YAML document') from None
+        raise YAMLInputError(
+            f'{what}: not valid YAML ({detail[:300]}); allowed: one well-formed YAML document'
+        ) from None
     except RecursionError:
-        raise YAMLInputError(f'{what}: nested too deeply to parse; allowed: at most {MAX_YAML_DEPTH} levels') from None
+        raise YAMLInputError(
+            f'{what}: nested too deeply to parse; allowed: at most {MAX_YAML_DEPTH} levels'
+        ) from None
     finally:
         loader.dispose()
 
@@ -121,28 +154,33 @@ def safe_load_yaml(text: str | bytes, what: str) -> Any:
 def read_yaml_file(path: Any, what: str | None = None) -> Any:
     """safe_load_yaml() of a file, refusing one larger than MAX_YAML_BYTES before reading it."""
     from pathlib import Path
+
     p = Path(path)
     what = what or f'file {str(p)!r}'
     try:
         size = p.stat().st_size
         if size > MAX_YAML_BYTES:
-            raise YAMLInputError(f'{what}: {size} bytes; allowed: at most {MAX_YAML_BYTES} bytes of YAML')
+            raise YAMLInputError(
+                f'{what}: {size} bytes; allowed: at most {MAX_YAML_BYTES} bytes of YAML'
+            )
         with open(p, 'rb') as fh:
             data = fh.read(MAX_YAML_BYTES + 1)
     except (OSError, ValueError) as err:
         if isinstance(err, YAMLInputError):
             raise
         reason = getattr(err, 'strerror', None) or str(err)
-        raise YAMLInputError(f'{what}: cannot be read ({reason}); allowed: a readable YAML file') from None
+        raise YAMLInputError(
+            f'{what}: cannot be read ({reason}); allowed: a readable YAML file'
+        ) from None
     return safe_load_yaml(data, what)
 
 
 @dataclass(frozen=True)
 class Number:
-    default: float | None          # None: required
+    default: float | None  # None: required
     low: float = -math.inf
     high: float = math.inf
-    low_open: bool = False         # True: value must be > low (not >=)
+    low_open: bool = False  # True: value must be > low (not >=)
     unit: str = ''
 
     def check(self, key: str, value: Any) -> float:
@@ -177,7 +215,9 @@ class Choice:
 
     def check(self, key: str, value: Any) -> str:
         if not isinstance(value, str) or value not in self.choices:
-            raise ModelError(f'{key}: {show(value)} is not allowed; allowed: one of {", ".join(self.choices)}')
+            raise ModelError(
+                f'{key}: {show(value)} is not allowed; allowed: one of {", ".join(self.choices)}'
+            )
         return value
 
 
@@ -196,33 +236,48 @@ def check_section(section: str, given: Any, spec: Mapping[str, Any]) -> dict[str
     if given is None:
         given = {}
     if not isinstance(given, Mapping):
-        raise ModelError(f'{section}: {show(given)} is not a mapping; allowed keys: {", ".join(spec)}')
+        raise ModelError(
+            f'{section}: {show(given)} is not a mapping; allowed keys: {", ".join(spec)}'
+        )
     unknown = [k for k in given if k not in spec]
     if unknown:
-        raise ModelError(f'{section}.{show(unknown[0]) if not isinstance(unknown[0], str) else unknown[0][:60]}: '
-                         f'unknown key (value {show(given[unknown[0]])}); allowed keys: {", ".join(spec)}')
+        raise ModelError(
+            f'{section}.'
+            f'{show(unknown[0]) if not isinstance(unknown[0], str) else unknown[0][:60]}: '
+            f'unknown key (value {show(given[unknown[0]])}); allowed keys: {", ".join(spec)}'
+        )
     out: dict[str, Any] = {}
     for key, rule in spec.items():
         path = f'{section}.{key}'
         if key in given:
             out[key] = rule.check(path, given[key])
         elif rule.default is None:
-            raise ModelError(f'{path}: missing; allowed: {rule.allowed() if hasattr(rule, "allowed") else "required"}')
+            raise ModelError(
+                f'{path}: missing; allowed: '
+                f'{rule.allowed() if hasattr(rule, "allowed") else "required"}'
+            )
         else:
             out[key] = rule.default
     return out
 
 
 def read_config_file(path: Any, folder: str, what: str, error: type) -> tuple[Any, Any]:
-    """(file path, parsed data) of a YAML file given as a path or as a name under config/<folder>/,
-    read with the bounded safe loader; raises `error` naming the file when it is missing or not
-    valid YAML (sweeps, fits and optimisations share this)."""
+    """
+    Return (file path, parsed data) of a YAML file: a path or a name under config/<folder>/.
+
+    The file is read with the bounded safe loader; raises `error` naming the file when it is
+    missing or not valid YAML (sweeps, fits and optimisations share this).
+    """
     from pathlib import Path
+
     p = Path(path)
     if not p.is_file():
         builtin = Path(__file__).resolve().parent.parent / 'config' / folder / f'{path}.yaml'
         if not builtin.is_file():
-            raise error(f'{what} {str(path)!r} not found; allowed: a YAML path or a name under config/{folder}/')
+            raise error(
+                f'{what} {str(path)!r} not found; allowed: a YAML path or a name under '
+                f'config/{folder}/'
+            )
         p = builtin
     try:
         return p, read_yaml_file(p, f'{what} {str(p)!r}')

@@ -1,4 +1,5 @@
 """The one stepping loop that sim_node, the offline runner, the tests and the benchmarks share."""
+
 from __future__ import annotations
 
 from pulsejet_sim.models.base import Command, Observation, SimulationBlowUp
@@ -27,11 +28,17 @@ class Simulation:
         return self.steps * self.model.dt_s
 
     def step(self, n_steps: int, command: Command | None = None) -> Observation:
-        """Advance n_steps physics steps holding `command`; raises SimulationBlowUp (state kept at
-        the last good step, further steps refused until reset)."""
+        """
+        Advance n_steps physics steps holding `command`.
+
+        Raises SimulationBlowUp (state kept at the last good step, further steps refused until
+        reset).
+        """
         if self.fault is not None:
-            raise SimulationBlowUp(f'simulation is stopped after a fault: {self.fault}; reset to continue',
-                                   self.time_s)
+            raise SimulationBlowUp(
+                f'simulation is stopped after a fault: {self.fault}; reset to continue',
+                self.time_s,
+            )
         if command is not None and command is not self.command:
             # checked once per new command (CommandError names the bad value): a NaN or an
             # out-of-range value never reaches the physics, whoever calls

@@ -1,4 +1,5 @@
-"""Complete ROS 2 message definitions (`ros2msg` schema text) built the way rosbag2 builds them.
+"""
+Complete ROS 2 message definitions (`ros2msg` schema text) built the way rosbag2 builds them.
 
 rosbag2 (rosbag2_cpp LocalMessageDefinitionSource) stores, per type, the type's own .msg text
 followed by every dependency, depth first in sorted order, each preceded by a line of 80 `=` and
@@ -7,43 +8,73 @@ Foxglove, mcap_ros2) decode messages from this text alone, so it must be complet
 
 The .msg files come from the installed ROS packages' share directories; no rclpy is imported.
 """
+
 from __future__ import annotations
 
 import functools
 import json
 import os
+from pathlib import Path
 import re
 import sys
-from pathlib import Path
 
 DELIMITER = '=' * 80 + '\n'
 
-# Same pattern as rosbag2: the first word of each field line ("foo_msgs/Bar" in "foo_msgs/Bar[] bar").
+# Same pattern as rosbag2: the first word of each field line
+# ("foo_msgs/Bar" in "foo_msgs/Bar[] bar").
 _FIELD_TYPE_RE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
-_PRIMITIVES = frozenset({
-    'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
-    'int32', 'uint32', 'int64', 'uint64', 'string',
-})
+_PRIMITIVES = frozenset(
+    {
+        'bool',
+        'byte',
+        'char',
+        'float32',
+        'float64',
+        'int8',
+        'uint8',
+        'int16',
+        'uint16',
+        'int32',
+        'uint32',
+        'int64',
+        'uint64',
+        'string',
+    }
+)
 _NAME = r'[a-zA-Z][a-zA-Z0-9_]*'
 _TYPE_RE = re.compile(rf'^({_NAME})/(?:({_NAME})/)?({_NAME})$')
 
 
 class MessageDefinitionError(LookupError):
-    """A message type whose .msg definition cannot be found or parsed (names the type and where we looked)."""
+    """
+    A message type whose .msg definition cannot be found or parsed.
+
+    The message names the type and where we looked.
+    """
 
 
 def split_type_name(type_name: str) -> tuple[str, str, str]:
-    """'pkg/msg/Type' or 'pkg/Type' -> ('pkg', 'msg', 'Type'); raises ValueError naming a bad name."""
+    """
+    Split 'pkg/msg/Type' or 'pkg/Type' into ('pkg', 'msg', 'Type').
+
+    Raises ValueError naming a bad name.
+    """
     match = _TYPE_RE.match(type_name) if isinstance(type_name, str) else None
     if match is None:
-        raise ValueError(f'message type name {type_name!r} not understood; expected "package/msg/Type"')
+        raise ValueError(
+            f'message type name {type_name!r} not understood; expected "package/msg/Type"'
+        )
     package, namespace, name = match.groups()
     return package, namespace or 'msg', name
 
 
 def _prefixes() -> list[Path]:
-    """Install prefixes to search: AMENT_PREFIX_PATH first (a sourced ROS), then this Python's prefix
-    (the PyPI ROS wheels install share/<pkg> under the venv and do not always set AMENT_PREFIX_PATH)."""
+    """
+    Return the install prefixes to search: AMENT_PREFIX_PATH first, then this Python's prefix.
+
+    AMENT_PREFIX_PATH is set by a sourced ROS; the PyPI ROS wheels install share/<pkg> under the
+    venv and do not always set AMENT_PREFIX_PATH.
+    """
     found: list[Path] = []
     for entry in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
         if entry:
@@ -59,7 +90,11 @@ def _prefixes() -> list[Path]:
 
 @functools.lru_cache(maxsize=None)
 def find_share_dir(package: str) -> Path:
-    """The share directory of an installed ROS package; raises MessageDefinitionError naming the package."""
+    """
+    Return the share directory of an installed ROS package.
+
+    Raises MessageDefinitionError naming the package.
+    """
     searched = []
     for prefix in _prefixes():
         share = prefix / 'share' / package
@@ -68,7 +103,8 @@ def find_share_dir(package: str) -> Path:
             return share
     raise MessageDefinitionError(
         f'ROS package {package!r} not found; looked in {", ".join(searched)} '
-        '(install the package or set AMENT_PREFIX_PATH)')
+        '(install the package or set AMENT_PREFIX_PATH)'
+    )
 
 
 def _definition_file(type_name: str, extension: str) -> Path:
@@ -82,12 +118,18 @@ def _msg_text(type_name: str) -> str:
     try:
         return path.read_text(encoding='utf-8')
     except OSError as exc:
-        raise MessageDefinitionError(f'no .msg definition for {type_name!r}: {path} ({exc.strerror})') from None
+        raise MessageDefinitionError(
+            f'no .msg definition for {type_name!r}: {path} ({exc.strerror})'
+        ) from None
 
 
 def _dependencies(text: str, package: str) -> list[str]:
-    """Non-primitive field types of a .msg text, sorted like rosbag2's std::set; same-package
-    short names get the package prefix ("Twist" in geometry_msgs -> "geometry_msgs/Twist")."""
+    """
+    Return the non-primitive field types of a .msg text, sorted like rosbag2's std::set.
+
+    Same-package short names get the package prefix ("Twist" in geometry_msgs ->
+    "geometry_msgs/Twist").
+    """
     deps: set[str] = set()
     for match in _FIELD_TYPE_RE.finditer(text):
         field_type = match.group(1)
@@ -99,12 +141,18 @@ def _dependencies(text: str, package: str) -> list[str]:
 
 @functools.lru_cache(maxsize=None)
 def full_text(type_name: str) -> str:
-    """The complete `ros2msg` definition of type_name (e.g. 'geometry_msgs/msg/TwistStamped')."""
+    """
+    Return the complete `ros2msg` definition of type_name.
+
+    type_name is e.g. 'geometry_msgs/msg/TwistStamped'.
+    """
     seen: set[str] = set()
 
     def append(name: str, depth: int) -> str:
         if depth <= 0:
-            raise MessageDefinitionError(f'definition of {type_name!r} nests deeper than 50 levels')
+            raise MessageDefinitionError(
+                f'definition of {type_name!r} nests deeper than 50 levels'
+            )
         text = _msg_text(name)
         package = split_type_name(name)[0]
         out = text
@@ -121,8 +169,12 @@ def full_text(type_name: str) -> str:
 
 @functools.lru_cache(maxsize=None)
 def type_hash(type_name: str) -> str:
-    """The RIHS01 type description hash generated with the package (share/<pkg>/msg/<Type>.json),
-    which rosbag2 stores as the channel's `topic_type_hash`; '' when the package ships no .json."""
+    """
+    Return the RIHS01 type description hash generated with the package.
+
+    The hash comes from share/<pkg>/msg/<Type>.json; rosbag2 stores it as the channel's
+    `topic_type_hash`. '' when the package ships no .json.
+    """
     try:
         path = _definition_file(type_name, '.json')
         data = json.loads(path.read_text(encoding='utf-8'))

@@ -1,5 +1,8 @@
-"""Read pulsejet MCAP recordings without rclpy: messages are decoded from the definitions stored in
-the file (mcap_ros2), so a recording stays readable on a machine without the ROS packages.
+"""
+Read pulsejet MCAP recordings without rclpy.
+
+Messages are decoded from the definitions stored in the file (mcap_ros2), so a recording stays
+readable on a machine without the ROS packages.
 
 The file is read front to back, record by record, with its own framing checks (never the index,
 never a length it cannot verify). That also reads a file whose writer was killed hard (no summary,
@@ -12,31 +15,44 @@ complete, indexed one that every MCAP/rosbag2 reader opens.
 A recording written by a newer pulsejet format (`pulsejet-format=N` in the MCAP header's library
 field, N > FORMAT_VERSION) or a newer MCAP major version is refused with BagReadError.
 """
+
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 import io
 import os
+from pathlib import Path
 import re
 import struct
+from typing import Any, Iterable, Iterator, NamedTuple
 import warnings
 import zlib
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Iterable, Iterator, NamedTuple
 
-import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import (Attachment, Channel, Chunk, DataEnd, Footer, Header, Message, Metadata,
-                          MetadataIndex, Schema)
+from mcap.records import (
+    Attachment,
+    Channel,
+    Chunk,
+    DataEnd,
+    Footer,
+    Header,
+    Message,
+    Metadata,
+    MetadataIndex,
+    Schema,
+)
 from mcap.stream_reader import breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
+import numpy as np
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 MCAP_MAGIC_PREFIX = b'\x89MCAP'
-FORMAT_VERSION = 1                    # pulsejet recording format this reader understands (and the writer writes)
+FORMAT_VERSION = 1  # pulsejet recording format this reader understands (and the writer writes)
 _FORMAT_RE = re.compile(r'pulsejet-format=(\d+)')
-MAX_CHUNK_UNCOMPRESSED = 1 << 30      # a chunk claiming more is corrupt (the writer's chunks are ~256 KiB)
+MAX_CHUNK_UNCOMPRESSED = (
+    1 << 30
+)  # a chunk claiming more is corrupt (the writer's chunks are ~256 KiB)
 _KNOWN_OPCODES = frozenset(int(o) for o in Opcode)
 
 # Types whose scalar load_series extracts: type name -> attribute path of the value.
@@ -49,14 +65,18 @@ CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 
 
 class BagReadError(ValueError):
-    """A file that is missing, not an MCAP, or not a ROS 2 (profile `ros2`) recording; names the file."""
+    """
+    A file that is missing, not an MCAP, or not a ROS 2 (profile `ros2`) recording.
+
+    The message names the file.
+    """
 
 
 class BagMessage(NamedTuple):
-    topic: str          # qualified name as stored, e.g. '/pulsejet/velocity'
-    type_name: str      # e.g. 'geometry_msgs/msg/TwistStamped'
-    log_time_ns: int    # receive time (recorder) or simulation time (offline runner), ns
-    msg: Any            # decoded message (attribute access like the rclpy class)
+    topic: str  # qualified name as stored, e.g. '/pulsejet/velocity'
+    type_name: str  # e.g. 'geometry_msgs/msg/TwistStamped'
+    log_time_ns: int  # receive time (recorder) or simulation time (offline runner), ns
+    msg: Any  # decoded message (attribute access like the rclpy class)
 
 
 @dataclass
@@ -65,25 +85,31 @@ class BagInfo:
 
     path: Path
     profile: str = ''
-    library: str = ''                                            # MCAP header library field
-    topics: dict[str, str] = field(default_factory=dict)         # topic -> type name
-    counts: dict[str, int] = field(default_factory=dict)         # topic -> messages
-    definitions: dict[str, str] = field(default_factory=dict)    # type name -> ros2msg text
-    channel_metadata: dict[str, dict[str, str]] = field(default_factory=dict)   # topic -> channel metadata
-    encodings: dict[str, str] = field(default_factory=dict)      # topic -> message encoding
+    library: str = ''  # MCAP header library field
+    topics: dict[str, str] = field(default_factory=dict)  # topic -> type name
+    counts: dict[str, int] = field(default_factory=dict)  # topic -> messages
+    definitions: dict[str, str] = field(default_factory=dict)  # type name -> ros2msg text
+    channel_metadata: dict[str, dict[str, str]] = field(
+        default_factory=dict
+    )  # topic -> channel metadata
+    encodings: dict[str, str] = field(default_factory=dict)  # topic -> message encoding
     schema_encodings: dict[str, str] = field(default_factory=dict)  # type name -> schema encoding
-    metadata: list[tuple[str, dict[str, str]]] = field(default_factory=list)  # MCAP metadata records
+    metadata: list[tuple[str, dict[str, str]]] = field(
+        default_factory=list
+    )  # MCAP metadata records
     attachments: list[Attachment] = field(default_factory=list)
-    truncated: bool = False                                      # no footer: writer killed hard (or cut)
-    file_size: int = 0                                           # bytes
-    valid_bytes: int = 0                                         # end of the last record read intact
-    bytes_dropped: int = 0                                       # bytes that could not be read
-    corrupt_chunks: int = 0                                      # chunks skipped (CRC, decompression)
-    undecodable: dict[str, int] = field(default_factory=dict)    # topic -> messages that failed to decode
-    orphan_messages: int = 0                                     # messages whose channel record was lost
+    truncated: bool = False  # no footer: writer killed hard (or cut)
+    file_size: int = 0  # bytes
+    valid_bytes: int = 0  # end of the last record read intact
+    bytes_dropped: int = 0  # bytes that could not be read
+    corrupt_chunks: int = 0  # chunks skipped (CRC, decompression)
+    undecodable: dict[str, int] = field(
+        default_factory=dict
+    )  # topic -> messages that failed to decode
+    orphan_messages: int = 0  # messages whose channel record was lost
     first_log_ns: int | None = None
     last_log_ns: int | None = None
-    stop_reason: str = ''                                        # why reading stopped before a footer
+    stop_reason: str = ''  # why reading stopped before a footer
 
     @property
     def message_count(self) -> int:
@@ -91,26 +117,40 @@ class BagInfo:
 
     @property
     def damaged(self) -> bool:
-        return bool(self.truncated or self.bytes_dropped or self.corrupt_chunks or self.undecodable
-                    or self.orphan_messages)
+        return bool(
+            self.truncated
+            or self.bytes_dropped
+            or self.corrupt_chunks
+            or self.undecodable
+            or self.orphan_messages
+        )
 
     def damage_report(self) -> str:
         """One paragraph saying what was recovered and what was cut ('' for an intact file)."""
         if not self.damaged:
             return ''
-        span = ('no messages' if self.first_log_ns is None else
-                f'log time {self.first_log_ns * 1e-9:.9g} s to {self.last_log_ns * 1e-9:.9g} s '
-                f'({(self.last_log_ns - self.first_log_ns) * 1e-9:.6g} s)')
-        parts = [f'{self.message_count} messages recovered ({span})',
-                 f'{self.bytes_dropped} of {self.file_size} bytes dropped']
+        span = (
+            'no messages'
+            if self.first_log_ns is None
+            else f'log time {self.first_log_ns * 1e-9:.9g} s to {self.last_log_ns * 1e-9:.9g} s '
+            f'({(self.last_log_ns - self.first_log_ns) * 1e-9:.6g} s)'
+        )
+        parts = [
+            f'{self.message_count} messages recovered ({span})',
+            f'{self.bytes_dropped} of {self.file_size} bytes dropped',
+        ]
         if self.truncated:
-            parts.append('no summary/footer (writer killed hard or file cut short)'
-                         + (f': {self.stop_reason}' if self.stop_reason else ''))
+            parts.append(
+                'no summary/footer (writer killed hard or file cut short)'
+                + (f': {self.stop_reason}' if self.stop_reason else '')
+            )
         if self.corrupt_chunks:
             parts.append(f'{self.corrupt_chunks} corrupt chunk(s) skipped')
         if self.undecodable:
-            parts.append('undecodable messages skipped: '
-                         + ', '.join(f'{t} {n}' for t, n in sorted(self.undecodable.items())))
+            parts.append(
+                'undecodable messages skipped: '
+                + ', '.join(f'{t} {n}' for t, n in sorted(self.undecodable.items()))
+            )
         if self.orphan_messages:
             parts.append(f'{self.orphan_messages} messages without their channel record skipped')
         return '; '.join(parts)
@@ -123,19 +163,26 @@ def _open_checked(path: str | Path) -> tuple[Path, Any]:
     if p.is_dir():
         raise BagReadError(f'{str(p)!r} is a directory; expected an MCAP recording file (.mcap)')
     if not p.is_file():
-        raise BagReadError(f'{str(p)!r} is not a regular file; expected an MCAP recording file (.mcap)')
+        raise BagReadError(
+            f'{str(p)!r} is not a regular file; expected an MCAP recording file (.mcap)'
+        )
     try:
         fh = open(p, 'rb')
     except OSError as exc:
-        raise BagReadError(f'{str(p)!r}: cannot be opened ({exc.strerror}); expected a readable MCAP recording') from None
+        raise BagReadError(
+            f'{str(p)!r}: cannot be opened ({exc.strerror}); expected a readable MCAP recording'
+        ) from None
     magic = fh.read(len(MCAP_MAGIC))
     if magic != MCAP_MAGIC:
         fh.close()
         if not magic:
             what = 'an empty file'
         elif magic.startswith(MCAP_MAGIC_PREFIX) and len(magic) == len(MCAP_MAGIC):
-            what = (f'an MCAP file of major version {magic[5:6].decode("latin-1")!r}, newer than this reader '
-                    f'understands (version \'0\'); update pulsejet/mcap to read it')
+            what = (
+                f'an MCAP file of major version {magic[5:6].decode("latin-1")!r}, newer than this '
+                'reader '
+                f"understands (version '0'); update pulsejet/mcap to read it"
+            )
         elif len(magic) < len(MCAP_MAGIC) and MCAP_MAGIC.startswith(magic):
             what = f'cut short ({len(magic)} bytes, not even the MCAP magic)'
         else:
@@ -145,15 +192,27 @@ def _open_checked(path: str | Path) -> tuple[Path, Any]:
 
 
 def format_version(library: str) -> int | None:
-    """The pulsejet format version recorded in an MCAP header's library field, or None (not pulsejet)."""
+    """
+    Return the pulsejet format version recorded in an MCAP header's library field.
+
+    None when the file is not pulsejet's.
+    """
     match = _FORMAT_RE.search(library or '')
     return int(match.group(1)) if match else None
 
 
-#: the record kinds the reader needs, by opcode; indexes and statistics are rebuilt by whoever needs them
-_RECORDS = {Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel, Opcode.CHUNK: Chunk,
-            Opcode.METADATA: Metadata, Opcode.ATTACHMENT: Attachment, Opcode.DATA_END: DataEnd,
-            Opcode.FOOTER: Footer}
+#: the record kinds the reader needs, by opcode; indexes and statistics are rebuilt by whoever
+#: needs them
+_RECORDS = {
+    Opcode.HEADER: Header,
+    Opcode.SCHEMA: Schema,
+    Opcode.CHANNEL: Channel,
+    Opcode.CHUNK: Chunk,
+    Opcode.METADATA: Metadata,
+    Opcode.ATTACHMENT: Attachment,
+    Opcode.DATA_END: DataEnd,
+    Opcode.FOOTER: Footer,
+}
 
 
 def _parse(opcode: int, body: bytes) -> Any:
@@ -180,36 +239,47 @@ def _chunk_records(chunk: Chunk) -> list[Any]:
 _CORRUPT = (Exception,)
 
 
-_CHUNK_FIXED = struct.Struct('<QQQII')   # message start/end time, uncompressed size, crc, compression length
-MAX_RESYNC_CANDIDATES = 100_000         # chunk-looking offsets tried after a broken frame
+_CHUNK_FIXED = struct.Struct(
+    '<QQQII'
+)  # message start/end time, uncompressed size, crc, compression length
+MAX_RESYNC_CANDIDATES = 100_000  # chunk-looking offsets tried after a broken frame
 
 
 def _chunk_at(buf: Any, i: int, size: int) -> bool:
-    """Is there an intact chunk record (frame fits, CRC of its content valid) at offset i?"""
+    """
+    Tell whether there is an intact chunk record at offset i.
+
+    Intact: the frame fits and the CRC of its content is valid.
+    """
     if i + 9 + _CHUNK_FIXED.size > size or buf[i] != Opcode.CHUNK:
         return False
-    length = int.from_bytes(buf[i + 1:i + 9], 'little')
+    length = int.from_bytes(buf[i + 1: i + 9], 'little')
     if length > size - i - 9 or length < _CHUNK_FIXED.size + 8:
         return False
     _, _, usize, crc, clen = _CHUNK_FIXED.unpack_from(buf, i + 9)
     if clen > 4 or crc == 0 or usize > MAX_CHUNK_UNCOMPRESSED:
         return False
     off = i + 9 + _CHUNK_FIXED.size
-    if bytes(buf[off:off + clen]) not in (b'', b'zstd', b'lz4'):
+    if bytes(buf[off: off + clen]) not in (b'', b'zstd', b'lz4'):
         return False
-    dlen = int.from_bytes(buf[off + clen:off + clen + 8], 'little')
+    dlen = int.from_bytes(buf[off + clen: off + clen + 8], 'little')
     if _CHUNK_FIXED.size + clen + 8 + dlen != length:
         return False
     try:
-        _chunk_records(_parse(Opcode.CHUNK, bytes(buf[i + 9:i + 9 + length])))
+        _chunk_records(_parse(Opcode.CHUNK, bytes(buf[i + 9: i + 9 + length])))
     except _CORRUPT:
         return False
     return True
 
 
 def _resync(fh: Any, start: int, size: int) -> int | None:
-    """Offset of the next intact chunk at or after `start` (after a damaged record frame), or None."""
+    """
+    Return the offset of the next intact chunk at or after `start`, or None.
+
+    Used after a damaged record frame.
+    """
     import mmap
+
     try:
         buf = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
@@ -230,16 +300,24 @@ def _resync(fh: Any, start: int, size: int) -> int | None:
 
 
 def _summary_definitions(fh: Any, size: int) -> list[Any]:
-    """Schema and Channel records of the summary section, when the footer and the summary CRC are
-    intact: they name the channels of messages whose own channel record sat in a damaged chunk."""
+    """
+    Return the Schema and Channel records of the summary section.
+
+    Only when the footer and the summary CRC are intact: they name the channels of messages whose
+    own channel record sat in a damaged chunk.
+    """
     footer_len = 9 + 20
     footer_pos = size - len(MCAP_MAGIC) - footer_len
     if footer_pos <= len(MCAP_MAGIC):
         return []
     fh.seek(footer_pos)
     tail = fh.read(footer_len + len(MCAP_MAGIC))
-    if len(tail) != footer_len + len(MCAP_MAGIC) or tail[-len(MCAP_MAGIC):] != MCAP_MAGIC \
-            or tail[0] != Opcode.FOOTER or int.from_bytes(tail[1:9], 'little') != 20:
+    if (
+        len(tail) != footer_len + len(MCAP_MAGIC)
+        or tail[-len(MCAP_MAGIC):] != MCAP_MAGIC
+        or tail[0] != Opcode.FOOTER
+        or int.from_bytes(tail[1:9], 'little') != 20
+    ):
         return []
     summary_start, _, crc = struct.unpack_from('<QQI', tail, 9)
     if crc == 0 or not len(MCAP_MAGIC) < summary_start <= footer_pos:
@@ -255,12 +333,18 @@ def _summary_definitions(fh: Any, size: int) -> list[Any]:
             break
         try:
             if opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
-                out.append((None, _parse(opcode, data[i + 9:i + 9 + length])))
+                out.append((None, _parse(opcode, data[i + 9: i + 9 + length])))
             elif opcode == Opcode.METADATA_INDEX:
-                # the metadata record it points to (e.g. the run's scene) even if its frame is damaged
-                index = MetadataIndex.read(ReadDataStream(io.BytesIO(data[i + 9:i + 9 + length])))
-                if len(MCAP_MAGIC) <= index.offset and index.offset + index.length <= summary_start \
-                        and 9 <= index.length <= MAX_CHUNK_UNCOMPRESSED:
+                # the metadata record it points to (e.g. the run's scene) even if its frame is
+                # damaged
+                index = MetadataIndex.read(
+                    ReadDataStream(io.BytesIO(data[i + 9: i + 9 + length]))
+                )
+                if (
+                    len(MCAP_MAGIC) <= index.offset
+                    and index.offset + index.length <= summary_start
+                    and 9 <= index.length <= MAX_CHUNK_UNCOMPRESSED
+                ):
                     fh.seek(index.offset)
                     raw = fh.read(index.length)
                     if raw[0] == Opcode.METADATA:
@@ -272,13 +356,15 @@ def _summary_definitions(fh: Any, size: int) -> list[Any]:
 
 
 def _records(fh: Any, info: BagInfo) -> Iterator[Any]:
-    """Records in file order, chunks opened.
+    """
+    Yield the records in file order, chunks opened.
 
     A record whose frame is intact but whose content is corrupt (a chunk failing its CRC or its
     decompression) is skipped. After a broken frame (an invalid opcode or a length running past the
     end of the file) reading resumes at the next intact chunk (found by its CRC), so damage in the
-    middle costs the damaged part only; a cut-off tail ends the read. Every byte not read is counted
-    in info.bytes_dropped; info.truncated is set without a footer and its closing magic."""
+    middle costs the damaged part only; a cut-off tail ends the read. Every byte not read is
+    counted in info.bytes_dropped; info.truncated is set without a footer and its closing magic.
+    """
     try:
         size = os.fstat(fh.fileno()).st_size
     except (OSError, AttributeError, io.UnsupportedOperation):
@@ -314,7 +400,7 @@ def _records(fh: Any, info: BagInfo) -> Iterator[Any]:
             if broken is None and first and opcode != Opcode.HEADER:
                 broken = f'the header record at byte {pos} is damaged (opcode 0x{opcode:02x})'
             if broken is not None:
-                if first:   # a damaged header: profile and library unknown, the data may be intact
+                if first:  # a damaged header: profile and library unknown, the data may be intact
                     first = False
                     yield from preload
                     preload = []
@@ -338,7 +424,7 @@ def _records(fh: Any, info: BagInfo) -> Iterator[Any]:
                 if opcode == Opcode.FOOTER:
                     info.stop_reason = f'corrupt footer record at byte {pos}'
                     break
-                if opcode == Opcode.HEADER:   # profile and library unknown: read the data anyway
+                if opcode == Opcode.HEADER:  # profile and library unknown: read the data anyway
                     yield from preload
                     preload = []
                 # the frame is intact (its length fits the file): skip this record only
@@ -356,15 +442,16 @@ def _records(fh: Any, info: BagInfo) -> Iterator[Any]:
             elif isinstance(record, DataEnd):
                 data_end = True
             elif isinstance(record, Metadata) and pos - 9 - length in preloaded_metadata:
-                continue   # already read through the summary's metadata index
+                continue  # already read through the summary's metadata index
             elif isinstance(record, Message) and (seen_chunk or data_end):
-                # a chunked file has no message outside its chunks: a damaged index record, not data
+                # a chunked file has no message outside its chunks: a damaged index record, not
+                # data
                 skipped += 9 + length
                 continue
             elif record is not None:
                 yield record
                 if preload and isinstance(record, Header):
-                    yield from preload   # the summary's channels, before any message needs them
+                    yield from preload  # the summary's channels, before any message needs them
                     preload = []
                 if isinstance(record, Footer):
                     # complete only with the closing magic (other readers check it)
@@ -372,23 +459,32 @@ def _records(fh: Any, info: BagInfo) -> Iterator[Any]:
                         footer_seen = True
                         info.valid_bytes = pos + len(MCAP_MAGIC)
                     else:
-                        info.stop_reason = 'the closing magic after the footer is missing or damaged'
+                        info.stop_reason = (
+                            'the closing magic after the footer is missing or damaged'
+                        )
                     break
     finally:
         info.truncated = not footer_seen
         info.bytes_dropped = skipped + max(size - info.valid_bytes, 0)
 
 
-def iter_bag(path: str | Path, topics: Iterable[str] | None = None,
-             info: BagInfo | None = None, decode: bool = True,
-             types: Iterable[str] | None = None) -> Iterator[BagMessage]:
-    """Messages in file order as BagMessage; `topics` filters by name ('pulsejet/x' or '/pulsejet/x'),
-    `types` by type name (skipped messages are counted in `info` but not decoded).
+def iter_bag(
+    path: str | Path,
+    topics: Iterable[str] | None = None,
+    info: BagInfo | None = None,
+    decode: bool = True,
+    types: Iterable[str] | None = None,
+) -> Iterator[BagMessage]:
+    """
+    Yield the messages in file order as BagMessage.
 
-    decode=False yields the raw CDR bytes as `msg`. Fills `info` (if given) while reading, including
-    what was cut or skipped. Raises BagReadError for a missing file, a non-MCAP file, a non-ros2
-    profile or a recording of a newer pulsejet format; never for a damaged tail or a corrupt chunk
-    (those are skipped and reported in `info`).
+    `topics` filters by name ('pulsejet/x' or '/pulsejet/x'), `types` by type name (skipped
+    messages are counted in `info` but not decoded).
+
+    decode=False yields the raw CDR bytes as `msg`. Fills `info` (if given) while reading,
+    including what was cut or skipped. Raises BagReadError for a missing file, a non-MCAP file, a
+    non-ros2 profile or a recording of a newer pulsejet format; never for a damaged tail or a
+    corrupt chunk (those are skipped and reported in `info`).
     """
     p, fh = _open_checked(path)
     info = info if info is not None else BagInfo(p)
@@ -405,14 +501,19 @@ def iter_bag(path: str | Path, topics: Iterable[str] | None = None,
                 info.profile = record.profile
                 info.library = record.library
                 if record.profile != 'ros2':
-                    raise BagReadError(f'{str(p)!r} is an MCAP file with profile {record.profile!r}; '
-                                       'expected a ROS 2 recording (profile "ros2")')
+                    raise BagReadError(
+                        f'{str(p)!r} is an MCAP file with profile {record.profile!r}; '
+                        'expected a ROS 2 recording (profile "ros2")'
+                    )
                 version = format_version(record.library)
                 if version is not None and version > FORMAT_VERSION:
                     raise BagReadError(
-                        f'{str(p)!r} was written in pulsejet recording format {version}, newer than this '
-                        f'pulsejet reads (format {FORMAT_VERSION}); allowed: recordings of format <= '
-                        f'{FORMAT_VERSION}; update pulsejet to read it')
+                        f'{str(p)!r} was written in pulsejet recording format {version}, newer '
+                        'than this '
+                        f'pulsejet reads (format {FORMAT_VERSION}); allowed: recordings of format '
+                        '<= '
+                        f'{FORMAT_VERSION}; update pulsejet to read it'
+                    )
             elif isinstance(record, Schema):
                 # the first record of an id wins: a later copy (summary section) may be damaged
                 record = schemas.setdefault(record.id, record)
@@ -420,7 +521,7 @@ def iter_bag(path: str | Path, topics: Iterable[str] | None = None,
                 info.schema_encodings.setdefault(record.name, record.encoding)
             elif isinstance(record, Channel):
                 if record.id in channels:
-                    continue   # the summary's copy of a channel already seen
+                    continue  # the summary's copy of a channel already seen
                 channels[record.id] = record
                 schema = schemas.get(record.schema_id)
                 info.topics[record.topic] = schema.name if schema else ''
@@ -434,7 +535,7 @@ def iter_bag(path: str | Path, topics: Iterable[str] | None = None,
             elif isinstance(record, Message):
                 channel = channels.get(record.channel_id)
                 if channel is None:
-                    info.orphan_messages += 1   # its channel record was lost with a corrupt chunk
+                    info.orphan_messages += 1  # its channel record was lost with a corrupt chunk
                     continue
                 info.counts[channel.topic] = info.counts.get(channel.topic, 0) + 1
                 t = record.log_time
@@ -452,37 +553,54 @@ def iter_bag(path: str | Path, topics: Iterable[str] | None = None,
                     if decoder is None:
                         try:
                             decoder = factory.decoder_for(channel.message_encoding, schema)
-                        except Exception:   # a schema text that does not parse (damaged file)
+                        except Exception:  # a schema text that does not parse (damaged file)
                             decoder = None
                         if decoder is None:
-                            if channel.message_encoding != 'cdr' or schema is None or schema.encoding != 'ros2msg':
+                            if (
+                                channel.message_encoding != 'cdr'
+                                or schema is None
+                                or schema.encoding != 'ros2msg'
+                            ):
                                 raise BagReadError(
                                     f'{str(p)!r}: topic {channel.topic!r} has encoding '
-                                    f'{channel.message_encoding!r} / schema {type_name!r} that cannot be '
-                                    'decoded; expected cdr with a ros2msg schema')
-                            decoder = False   # a ros2msg schema that does not parse: skip its messages
+                                    f'{channel.message_encoding!r} / schema {type_name!r} that '
+                                    'cannot be '
+                                    'decoded; expected cdr with a ros2msg schema'
+                                )
+                            decoder = (
+                                False  # a ros2msg schema that does not parse: skip its messages
+                            )
                         decoders[channel.id] = decoder
                     if decoder is False:
-                        info.undecodable[channel.topic] = info.undecodable.get(channel.topic, 0) + 1
+                        info.undecodable[channel.topic] = (
+                            info.undecodable.get(channel.topic, 0) + 1
+                        )
                         continue
                     try:
                         msg = decoder(record.data)
-                    except Exception:   # a message damaged inside an intact chunk
-                        info.undecodable[channel.topic] = info.undecodable.get(channel.topic, 0) + 1
+                    except Exception:  # a message damaged inside an intact chunk
+                        info.undecodable[channel.topic] = (
+                            info.undecodable.get(channel.topic, 0) + 1
+                        )
                         continue
                 yield BagMessage(channel.topic, type_name, record.log_time, msg)
     finally:
         fh.close()
 
 
-def read_bag(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[tuple[str, str, int, Any]]:
+def read_bag(
+    path: str | Path, topics: Iterable[str] | None = None
+) -> Iterator[tuple[str, str, int, Any]]:
     """Yield (topic, type_name, log_time_ns, msg) for every message, in file order."""
     yield from iter_bag(path, topics)
 
 
 def bag_info(path: str | Path) -> BagInfo:
-    """Topics, types, counts, channel metadata, metadata records, definitions and damage of a file
-    (reads it once without decoding)."""
+    """
+    Return topics, types, counts, channel metadata, metadata records, definitions and damage.
+
+    Reads the file once without decoding.
+    """
     info = BagInfo(Path(path))
     for _ in iter_bag(path, info=info, decode=False):
         pass
@@ -490,8 +608,12 @@ def bag_info(path: str | Path) -> BagInfo:
 
 
 def read_metadata(path: str | Path, name: str | None = None) -> dict[str, str]:
-    """The key/values of the MCAP metadata records called `name` (all records when None), merged in
-    file order. Reads a damaged file as far as it can; BagReadError as iter_bag."""
+    """
+    Return the key/values of the MCAP metadata records called `name`, merged in file order.
+
+    All records when `name` is None. Reads a damaged file as far as it can; BagReadError as
+    iter_bag.
+    """
     info = BagInfo(Path(path))
     for _ in iter_bag(path, info=info, decode=False, types=()):
         pass
@@ -508,7 +630,11 @@ def stamp_to_s(stamp: Any) -> float:
 
 
 def find_topic(names: Iterable[str], relative: str) -> str | None:
-    """The stored topic for a relative name: '/pulsejet/velocity' or a namespaced '/ns/pulsejet/velocity'."""
+    """
+    Return the stored topic for a relative name.
+
+    '/pulsejet/velocity' or a namespaced '/ns/pulsejet/velocity'.
+    """
     rel = relative.lstrip('/')
     names = list(names)
     if '/' + rel in names:
@@ -523,8 +649,11 @@ def _scalar(msg: Any, path: tuple[str, ...]) -> float:
     return float(msg)
 
 
-def load_series(path: str | Path, info: BagInfo | None = None) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Scalar time series of every Float64 / TwistStamped / WrenchStamped / Clock topic in the file.
+def load_series(
+    path: str | Path, info: BagInfo | None = None
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """
+    Scalar time series of every Float64 / TwistStamped / WrenchStamped / Clock topic in the file.
 
     Returns {qualified topic: (t_s, value)} sorted by time. Values: Float64 `.data`, TwistStamped
     `.twist.linear.x`, WrenchStamped `.wrench.force.x`, Clock: simulation time in s. Times: the
@@ -533,7 +662,9 @@ def load_series(path: str | Path, info: BagInfo | None = None) -> dict[str, tupl
     logs wall-clock receive times), else the log time itself in s.
     """
     raw: dict[str, tuple[list[float], list[float], bool]] = {}
-    for topic, type_name, log_ns, msg in iter_bag(path, info=info, types=[*SCALAR_FIELDS, CLOCK_TYPE]):
+    for topic, type_name, log_ns, msg in iter_bag(
+        path, info=info, types=[*SCALAR_FIELDS, CLOCK_TYPE]
+    ):
         if type_name in SCALAR_FIELDS:
             value = _scalar(msg, SCALAR_FIELDS[type_name])
         elif type_name == CLOCK_TYPE:
@@ -546,8 +677,9 @@ def load_series(path: str | Path, info: BagInfo | None = None) -> dict[str, tupl
         times.append(t)
         values.append(value)
 
-    clock_topic = next((t for t, (_, _, stamped) in raw.items()
-                        if t.endswith('/clock') and not stamped), None)
+    clock_topic = next(
+        (t for t, (_, _, stamped) in raw.items() if t.endswith('/clock') and not stamped), None
+    )
     to_sim = _clock_map(raw[clock_topic][0], raw[clock_topic][1]) if clock_topic else None
     series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for topic, (times, values, stamped) in raw.items():
@@ -565,8 +697,12 @@ def load_series(path: str | Path, info: BagInfo | None = None) -> dict[str, tupl
 
 
 def _clock_map(log_s: list[float], sim_s: list[float]) -> Any | None:
-    """Function mapping log times (s) to simulation time (s) by interpolating the /clock samples
-    (receive time -> carried time); outside their span it continues at the real-time rate."""
+    """
+    Return a function mapping log times (s) to simulation time (s).
+
+    It interpolates the /clock samples (receive time -> carried time); outside their span it
+    continues at the real-time rate.
+    """
     if not log_s:
         return None
     order = np.argsort(log_s, kind='stable')
@@ -579,12 +715,14 @@ def _clock_map(log_s: list[float], sim_s: list[float]) -> Any | None:
         out[before] = sx[0] + (t[before] - lx[0])
         out[after] = sx[-1] + (t[after] - lx[-1])
         return out
+
     return to_sim
 
 
 def repair(path: str | Path, out_path: str | Path | None = None) -> Path:
     """Rewrite a damaged recording into a complete one; see pulsejet_sim.bag.repair.repair_file."""
     from pulsejet_sim.bag.repair import repair_file  # local: the reader must not need the writer
+
     result = repair_file(path, out_path, overwrite=True)
     if not result.source.damaged:
         warnings.warn(f'{str(path)!r} was already complete; rewrote it anyway', stacklevel=2)

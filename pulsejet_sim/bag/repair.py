@@ -1,4 +1,5 @@
-"""`pulsejet repair FILE.mcap`: rewrite a damaged recording into a complete, indexed one.
+"""
+`pulsejet repair FILE.mcap`: rewrite a damaged recording into a complete, indexed one.
 
 A recorder killed hard (SIGKILL, a crash, the machine losing power) leaves an MCAP file without its
 summary and footer, its last chunk possibly cut in half: rosbags (`File end magic is invalid`),
@@ -13,31 +14,42 @@ with its log and publish times, every metadata record (e.g. the `pulsejet` scene
 every attachment. Only the old `rosbag2` metadata record (present only in a file that was closed)
 is regenerated from the messages actually kept.
 """
+
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import dataclass
 from pathlib import Path
+import sys
 from typing import Sequence
 
-from pulsejet_sim.bag.reader import (BagInfo, BagReadError, FORMAT_VERSION, _open_checked, _records,
-                                     format_version)
+from pulsejet_sim.bag.reader import (
+    _open_checked,
+    _records,
+    BagInfo,
+    BagReadError,
+    FORMAT_VERSION,
+    format_version,
+)
 
 
 @dataclass
 class RepairResult:
     out_path: Path
-    source: BagInfo          # what the damaged file held and what was cut (see BagInfo.damage_report)
-    messages: int            # messages written to out_path
-    skipped_channels: dict[str, str]   # topic -> why it could not be rewritten
+    source: BagInfo  # what the damaged file held and what was cut (see BagInfo.damage_report)
+    messages: int  # messages written to out_path
+    skipped_channels: dict[str, str]  # topic -> why it could not be rewritten
 
     def report(self) -> str:
-        lines = [f'repaired {self.source.path} -> {self.out_path}: {self.messages} messages on '
-                 f'{len(self.source.topics) - len(self.skipped_channels)} topics, '
-                 f'{len(self.source.metadata)} metadata record(s), channel metadata kept']
+        lines = [
+            f'repaired {self.source.path} -> {self.out_path}: {self.messages} messages on '
+            f'{len(self.source.topics) - len(self.skipped_channels)} topics, '
+            f'{len(self.source.metadata)} metadata record(s), channel metadata kept'
+        ]
         damage = self.source.damage_report()
-        lines.append(f'source: {damage}' if damage else 'source: was already complete (rewritten anyway)')
+        lines.append(
+            f'source: {damage}' if damage else 'source: was already complete (rewritten anyway)'
+        )
         lines.extend(f'skipped topic {t}: {why}' for t, why in self.skipped_channels.items())
         return '\n'.join(lines)
 
@@ -47,23 +59,35 @@ def default_output(path: str | Path) -> Path:
     return src.with_name(src.stem + '.repaired.mcap')
 
 
-def repair_file(path: str | Path, out_path: str | Path | None = None, *, overwrite: bool = False) -> RepairResult:
-    """Rewrite `path` into `out_path` (default `<name>.repaired.mcap`). Raises BagReadError for a
-    file that is not a readable ros2 MCAP recording at all, or an output that would replace the input
-    (or an existing file without overwrite=True)."""
-    from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
+def repair_file(
+    path: str | Path, out_path: str | Path | None = None, *, overwrite: bool = False
+) -> RepairResult:
+    """
+    Rewrite `path` into `out_path` (default `<name>.repaired.mcap`).
 
-    from pulsejet_sim.bag.writer import BagError, BagWriter   # local: reading never needs the writer
+    Raises BagReadError for a file that is not a readable ros2 MCAP recording at all, or an output
+    that would replace the input (or an existing file without overwrite=True).
+    """
+    from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
+    from pulsejet_sim.bag.writer import (  # local: reading never needs the writer
+        BagError,
+        BagWriter,
+    )
+
     src = Path(path)
     out = Path(out_path) if out_path is not None else default_output(src)
     if out.resolve() == src.resolve():
-        raise BagReadError(f'repair output {str(out)!r} rejected; allowed: a path other than the input file')
+        raise BagReadError(
+            f'repair output {str(out)!r} rejected; allowed: a path other than the input file'
+        )
     if out.exists() and not overwrite:
-        raise BagReadError(f'repair output {str(out)!r} exists; allowed: a new path (or --force to replace it)')
+        raise BagReadError(
+            f'repair output {str(out)!r} exists; allowed: a new path (or --force to replace it)'
+        )
     p, fh = _open_checked(src)
     info = BagInfo(p)
     schemas: dict[int, Schema] = {}
-    channels: dict[int, str] = {}        # channel id -> topic as stored in the source
+    channels: dict[int, str] = {}  # channel id -> topic as stored in the source
     skipped: dict[str, str] = {}
     written = 0
     tmp = out.with_name(out.name + '.partial')
@@ -73,22 +97,28 @@ def repair_file(path: str | Path, out_path: str | Path | None = None, *, overwri
             if isinstance(record, Header):
                 info.profile, info.library = record.profile, record.library
                 if record.profile != 'ros2':
-                    raise BagReadError(f'{str(p)!r} is an MCAP file with profile {record.profile!r}; '
-                                       'expected a ROS 2 recording (profile "ros2")')
+                    raise BagReadError(
+                        f'{str(p)!r} is an MCAP file with profile {record.profile!r}; '
+                        'expected a ROS 2 recording (profile "ros2")'
+                    )
                 version = format_version(record.library)
                 if version is not None and version > FORMAT_VERSION:
-                    raise BagReadError(f'{str(p)!r} was written in pulsejet recording format {version}, newer '
-                                       f'than this pulsejet repairs (format {FORMAT_VERSION}); update pulsejet')
+                    raise BagReadError(
+                        f'{str(p)!r} was written in pulsejet recording format {version}, newer '
+                        f'than this pulsejet repairs (format {FORMAT_VERSION}); update pulsejet'
+                    )
                 bag = BagWriter(tmp)
                 continue
-            if bag is None:   # the header record was damaged (the reader skipped it): keep the data
+            if bag is None:  # the header record was damaged (the reader skipped it): keep the data
                 bag = BagWriter(tmp)
             if isinstance(record, Schema):
-                record = schemas.setdefault(record.id, record)   # first copy wins (summary copies follow)
+                record = schemas.setdefault(
+                    record.id, record
+                )  # first copy wins (summary copies follow)
                 info.definitions.setdefault(record.name, record.data.decode('utf-8', 'replace'))
             elif isinstance(record, Channel):
                 if record.topic in info.channel_metadata and record.id in channels:
-                    continue   # the summary's copy of a channel already added
+                    continue  # the summary's copy of a channel already added
                 schema = schemas.get(record.schema_id)
                 type_name = schema.name if schema else ''
                 info.topics[record.topic] = type_name
@@ -99,8 +129,12 @@ def repair_file(path: str | Path, out_path: str | Path | None = None, *, overwri
                         raise BagError(f'its schema (id {record.schema_id}) was lost')
                     if record.message_encoding != 'cdr':
                         raise BagError(f'message encoding {record.message_encoding!r} is not cdr')
-                    bag.add_topic(record.topic, type_name, definition=info.definitions[type_name],
-                                  channel_metadata=dict(record.metadata))
+                    bag.add_topic(
+                        record.topic,
+                        type_name,
+                        definition=info.definitions[type_name],
+                        channel_metadata=dict(record.metadata),
+                    )
                     channels[record.id] = record.topic
                 except (BagError, ValueError, LookupError) as err:
                     skipped[record.topic] = str(err)
@@ -117,12 +151,17 @@ def repair_file(path: str | Path, out_path: str | Path | None = None, *, overwri
                 written += 1
             elif isinstance(record, Metadata):
                 info.metadata.append((record.name, dict(record.metadata)))
-                if record.name != 'rosbag2':       # regenerated on close from what was kept
+                if record.name != 'rosbag2':  # regenerated on close from what was kept
                     bag.add_metadata(record.name, dict(record.metadata))
             elif isinstance(record, Attachment):
                 info.attachments.append(record)
-                bag.add_attachment(record.name, record.data, record.media_type, record.log_time,
-                                   record.create_time)
+                bag.add_attachment(
+                    record.name,
+                    record.data,
+                    record.media_type,
+                    record.log_time,
+                    record.create_time,
+                )
         if bag is None:
             raise BagReadError(f'{str(p)!r} holds no readable MCAP record; nothing to repair')
         bag.close()
@@ -140,11 +179,16 @@ def main_repair(argv: Sequence[str] | None = None) -> int:
     """`pulsejet repair FILE.mcap [--out NEW.mcap] [--force]`. Exit 0 repaired, 2 bad input."""
     parser = argparse.ArgumentParser(
         prog='pulsejet repair',
-        description='Rewrite a recording whose writer was killed hard (no summary, cut-off last chunk) or '
-                    'that was damaged into a complete, indexed MCAP file that rosbags, ros2 bag and Foxglove '
-                    'open, keeping every readable message, channel metadata (QoS, type hash) and metadata record.')
+        description='Rewrite a recording whose writer was killed hard (no summary, cut-off last '
+                    'chunk) or '
+        'that was damaged into a complete, indexed MCAP file that rosbags, ros2 bag and Foxglove '
+        'open, keeping every readable message, channel metadata (QoS, type hash) and metadata '
+        'record.',
+    )
     parser.add_argument('file', help='damaged MCAP recording (.mcap)')
-    parser.add_argument('--out', default=None, help='output path (default: FILE.repaired.mcap next to FILE)')
+    parser.add_argument(
+        '--out', default=None, help='output path (default: FILE.repaired.mcap next to FILE)'
+    )
     parser.add_argument('--force', action='store_true', help='replace --out if it exists')
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
@@ -153,7 +197,10 @@ def main_repair(argv: Sequence[str] | None = None) -> int:
         print(f'pulsejet repair: error: {err}', file=sys.stderr)
         return 2
     except OSError as err:
-        print(f'pulsejet repair: error: {str(err.filename or args.out)!r}: {err.strerror}', file=sys.stderr)
+        print(
+            f'pulsejet repair: error: {str(err.filename or args.out)!r}: {err.strerror}',
+            file=sys.stderr,
+        )
         return 2
     print(result.report())
     return 0

@@ -1,4 +1,5 @@
-"""MCAP writer laid out the way rosbag2 (rosbag2_storage_mcap, Jazzy) writes it.
+"""
+MCAP writer laid out the way rosbag2 (rosbag2_storage_mcap, Jazzy) writes it.
 
 Layout: profile `ros2`; one schema per message type with encoding `ros2msg` and the complete
 definition text (msgdefs.full_text); one channel per topic with encoding `cdr` and metadata
@@ -14,11 +15,12 @@ Crash safety:
   the last flush_period_s; bag.reader reads such a truncated file up to its last complete chunk
   and `pulsejet repair` (bag.repair) rewrites it into a complete one with all its metadata.
 
-Format: the MCAP header's library field carries `pulsejet-format=<FORMAT_VERSION>`; a reader refuses
-a recording of a newer format with a clear message (bag.reader.FORMAT_VERSION).
+Format: the MCAP header's library field carries `pulsejet-format=<FORMAT_VERSION>`; a reader
+refuses a recording of a newer format with a clear message (bag.reader.FORMAT_VERSION).
 
 Topic names are stored fully qualified like rosbag2 ('pulsejet/velocity' -> '/pulsejet/velocity').
 """
+
 from __future__ import annotations
 
 import atexit
@@ -26,32 +28,41 @@ import contextlib
 import datetime
 import math
 import os
+from pathlib import Path
 import signal
 import threading
 import time
-import weakref
-from pathlib import Path
 from types import FrameType
 from typing import Any, Callable, Iterable, Iterator
+import weakref
 
-import yaml
 from mcap.writer import CompressionType, Writer
-
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.reader import FORMAT_VERSION
+import yaml
 
 LIBRARY = f'pulsejet_sim.bag pulsejet-format={FORMAT_VERSION} (rosbag2_storage_mcap layout)'
-COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE}
+COMPRESSIONS = {
+    'zstd': CompressionType.ZSTD,
+    'lz4': CompressionType.LZ4,
+    'none': CompressionType.NONE,
+}
 
 
 class BagError(RuntimeError):
-    """Misuse of a bag writer (unknown topic, write after close, ...); the message names the value."""
+    """Bag writer misuse (unknown topic, write after close, ...); the message names the value."""
 
 
 def qualify_topic(topic: str) -> str:
-    """Fully qualified topic name as rosbag2 records it: 'pulsejet/velocity' -> '/pulsejet/velocity'."""
+    """
+    Return the fully qualified topic name as rosbag2 records it.
+
+    'pulsejet/velocity' -> '/pulsejet/velocity'.
+    """
     if not isinstance(topic, str) or not topic.strip('/') or ' ' in topic:
-        raise BagError(f'topic name {topic!r} is not a ROS topic name; expected e.g. "pulsejet/velocity"')
+        raise BagError(
+            f'topic name {topic!r} is not a ROS topic name; expected e.g. "pulsejet/velocity"'
+        )
     return topic if topic.startswith('/') else '/' + topic
 
 
@@ -64,7 +75,8 @@ def type_name_of(msg: Any) -> str:
 
 
 class BagWriter:
-    """Write CDR-serialized ROS 2 messages to one MCAP file readable by rosbag2, rosbags and Foxglove.
+    """
+    Write CDR-serialized ROS 2 messages to one MCAP file readable by rosbag2, rosbags and Foxglove.
 
     Usage::
 
@@ -72,53 +84,80 @@ class BagWriter:
             bag.add_topic('pulsejet/velocity', 'geometry_msgs/msg/TwistStamped')
             bag.write('pulsejet/velocity', serialize_message(msg), log_time_ns)
 
-    Thread-safe: writes from several executor threads and a close() from another thread are serialized.
+    Thread-safe: writes from several executor threads and a close() from another thread are
+    serialized.
     """
 
-    def __init__(self, path: str | os.PathLike, *, compression: str = 'zstd',
-                 chunk_size_bytes: int = 256 * 1024, flush_period_s: float = 1.0) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        *,
+        compression: str = 'zstd',
+        chunk_size_bytes: int = 256 * 1024,
+        flush_period_s: float = 1.0,
+    ) -> None:
         if compression not in COMPRESSIONS:
-            raise BagError(f'compression={compression!r} not supported; allowed: {sorted(COMPRESSIONS)}')
+            raise BagError(
+                f'compression={compression!r} not supported; allowed: {sorted(COMPRESSIONS)}'
+            )
         if not (isinstance(chunk_size_bytes, int) and chunk_size_bytes > 0):
-            raise BagError(f'chunk_size_bytes={chunk_size_bytes!r} rejected; allowed: a positive integer')
-        if not (isinstance(flush_period_s, (int, float)) and flush_period_s > 0 and math.isfinite(flush_period_s)):
-            raise BagError(f'flush_period_s={flush_period_s!r} rejected; allowed: a positive finite number of s')
+            raise BagError(
+                f'chunk_size_bytes={chunk_size_bytes!r} rejected; allowed: a positive integer'
+            )
+        if not (
+            isinstance(flush_period_s, (int, float))
+            and flush_period_s > 0
+            and math.isfinite(flush_period_s)
+        ):
+            raise BagError(
+                f'flush_period_s={flush_period_s!r} rejected; allowed: a positive finite number '
+                'of s'
+            )
         self.path = Path(path)
         self.compression = compression
         self.flush_period_s = float(flush_period_s)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, 'wb')
-        self._writer = Writer(self._file, chunk_size=chunk_size_bytes, compression=COMPRESSIONS[compression])
+        self._writer = Writer(
+            self._file, chunk_size=chunk_size_bytes, compression=COMPRESSIONS[compression]
+        )
         self._writer.start(profile='ros2', library=LIBRARY)
         self._file.flush()
         self._lock = threading.RLock()
-        self._schemas: dict[str, int] = {}            # type name -> schema id
-        self._channels: dict[str, int] = {}           # qualified topic -> channel id
+        self._schemas: dict[str, int] = {}  # type name -> schema id
+        self._channels: dict[str, int] = {}  # qualified topic -> channel id
         self._topic_info: dict[str, dict[str, Any]] = {}
         self._counts: dict[str, int] = {}
         self._first_ns: int | None = None
         self._last_ns: int | None = None
         self._last_flush = time.monotonic()
-        self._pending_since: float | None = None      # monotonic time of the oldest unflushed message
+        self._pending_since: float | None = None  # monotonic time of the oldest unflushed message
         self._closed = False
-        self._busy_thread: int | None = None          # thread id inside write(), for signal deferral
+        self._busy_thread: int | None = None  # thread id inside write(), for signal deferral
         self._pending_signal: int | None = None
-        self._previous_handlers: dict = {}               # signal -> handler before install_signal_handlers
-        # Close at interpreter exit too (sys.exit, an uncaught exception), without keeping self alive.
+        self._previous_handlers: dict = {}  # signal -> handler before install_signal_handlers
+        # Close at interpreter exit too (sys.exit, an uncaught exception), without keeping self
+        # alive.
         self._atexit = _weak_close(self)
         atexit.register(self._atexit)
         # An idle writer (no write() to trigger the flush) still flushes within flush_period_s.
         self._stop_flusher = threading.Event()
-        self._flusher = threading.Thread(target=_flush_loop, args=(weakref.ref(self), self._stop_flusher,
-                                                                   self._tick_s()),
-                                         name=f'bag-flush:{self.path.name}', daemon=True)
+        self._flusher = threading.Thread(
+            target=_flush_loop,
+            args=(weakref.ref(self), self._stop_flusher, self._tick_s()),
+            name=f'bag-flush:{self.path.name}',
+            daemon=True,
+        )
         self._flusher.start()
 
     def _tick_s(self) -> float:
         return min(max(self.flush_period_s / 10.0, 0.005), 0.5)
 
     def _flush_due(self, now: float) -> bool:
-        return self._pending_since is not None and now - self._pending_since >= self.flush_period_s - self._tick_s()
+        return (
+            self._pending_since is not None
+            and now - self._pending_since >= self.flush_period_s - self._tick_s()
+        )
 
     # -- context manager ------------------------------------------------------------------------
     def __enter__(self) -> 'BagWriter':
@@ -145,29 +184,40 @@ class BagWriter:
             return {t: info['type'] for t, info in self._topic_info.items()}
 
     # -- writing --------------------------------------------------------------------------------
-    def add_topic(self, topic: str, type_name: str, offered_qos_profiles: str = '',
-                  definition: str | None = None, channel_metadata: dict[str, str] | None = None) -> str:
-        """Register a topic (idempotent for the same type); returns the qualified name.
+    def add_topic(
+        self,
+        topic: str,
+        type_name: str,
+        offered_qos_profiles: str = '',
+        definition: str | None = None,
+        channel_metadata: dict[str, str] | None = None,
+    ) -> str:
+        """
+        Register a topic (idempotent for the same type); returns the qualified name.
 
         offered_qos_profiles: the YAML rosbag2 stores (see qos_profiles_yaml); '' when unknown.
         definition: complete ros2msg text to store instead of the installed one (used by repair()).
-        channel_metadata: the channel's metadata to store verbatim (repair: every key of the damaged
-        file's channel, `offered_qos_profiles` and `topic_type_hash` included) instead of the computed one.
-        Raises BagError for a topic re-added with another type, MessageDefinitionError when the
-        type's .msg files are not installed.
+        channel_metadata: the channel's metadata to store verbatim (repair: every key of the
+        damaged file's channel, `offered_qos_profiles` and `topic_type_hash` included) instead of
+        the computed one. Raises BagError for a topic re-added with another type,
+        MessageDefinitionError when the type's .msg files are not installed.
         """
         name = qualify_topic(topic)
         msgdefs.split_type_name(type_name)
         with self._mutating():
             if name in self._channels:
                 if self._topic_info[name]['type'] != type_name:
-                    raise BagError(f'topic {name!r} already added with type '
-                                   f'{self._topic_info[name]["type"]!r}, not {type_name!r}')
+                    raise BagError(
+                        f'topic {name!r} already added with type '
+                        f'{self._topic_info[name]["type"]!r}, not {type_name!r}'
+                    )
                 return name
             schema_id = self._schemas.get(type_name)
             if schema_id is None:
                 text = definition if definition is not None else msgdefs.full_text(type_name)
-                schema_id = self._writer.register_schema(type_name, 'ros2msg', text.encode('utf-8'))
+                schema_id = self._writer.register_schema(
+                    type_name, 'ros2msg', text.encode('utf-8')
+                )
                 self._schemas[type_name] = schema_id
             if channel_metadata is not None:
                 metadata = {str(k): str(v) for k, v in channel_metadata.items()}
@@ -175,27 +225,51 @@ class BagWriter:
                 type_hash = metadata.get('topic_type_hash', '')
             else:
                 type_hash = msgdefs.type_hash(type_name)
-                metadata = {'offered_qos_profiles': offered_qos_profiles, 'topic_type_hash': type_hash}
+                metadata = {
+                    'offered_qos_profiles': offered_qos_profiles,
+                    'topic_type_hash': type_hash,
+                }
             self._channels[name] = self._writer.register_channel(name, 'cdr', schema_id, metadata)
-            self._topic_info[name] = {'type': type_name, 'qos': offered_qos_profiles, 'hash': type_hash}
+            self._topic_info[name] = {
+                'type': type_name,
+                'qos': offered_qos_profiles,
+                'hash': type_hash,
+            }
             self._counts[name] = 0
             return name
 
-    def write(self, topic: str, cdr: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
-        """Append one CDR-serialized message; log_time_ns is the receive (or simulation) time in ns."""
+    def write(
+        self, topic: str, cdr: bytes, log_time_ns: int, publish_time_ns: int | None = None
+    ) -> None:
+        """
+        Append one CDR-serialized message.
+
+        log_time_ns is the receive (or simulation) time in ns.
+        """
         name = topic if topic in self._channels else qualify_topic(topic)
         if not isinstance(log_time_ns, int) or log_time_ns < 0:
             raise BagError(f'log_time_ns={log_time_ns!r} rejected; allowed: an integer >= 0 (ns)')
         with self._mutating():
             channel = self._channels.get(name)
             if channel is None:
-                raise BagError(f'topic {name!r} not added; call add_topic first (added: {sorted(self._channels)})')
+                raise BagError(
+                    f'topic {name!r} not added; call add_topic first (added: '
+                    f'{sorted(self._channels)})'
+                )
             self._counts[name] += 1
-            self._writer.add_message(channel, log_time_ns, bytes(cdr),
-                                     log_time_ns if publish_time_ns is None else int(publish_time_ns),
-                                     sequence=self._counts[name])
-            self._first_ns = log_time_ns if self._first_ns is None else min(self._first_ns, log_time_ns)
-            self._last_ns = log_time_ns if self._last_ns is None else max(self._last_ns, log_time_ns)
+            self._writer.add_message(
+                channel,
+                log_time_ns,
+                bytes(cdr),
+                log_time_ns if publish_time_ns is None else int(publish_time_ns),
+                sequence=self._counts[name],
+            )
+            self._first_ns = (
+                log_time_ns if self._first_ns is None else min(self._first_ns, log_time_ns)
+            )
+            self._last_ns = (
+                log_time_ns if self._last_ns is None else max(self._last_ns, log_time_ns)
+            )
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
@@ -204,8 +278,12 @@ class BagWriter:
 
     @contextlib.contextmanager
     def _mutating(self) -> Iterator[None]:
-        """Hold the lock and mark this thread busy, so a signal handler landing mid-record defers
-        the close to the end of the operation instead of cutting the record in half."""
+        """
+        Hold the lock and mark this thread busy.
+
+        So a signal handler landing mid-record defers the close to the end of the operation instead
+        of cutting the record in half.
+        """
         pending = None
         try:
             with self._lock:
@@ -224,19 +302,37 @@ class BagWriter:
                 _redeliver(pending, self._previous_handlers.get(pending))
 
     def write_message(self, topic: str, msg: Any, log_time_ns: int) -> None:
-        """Serialize an rclpy message and write it, adding the topic with the message's type if new."""
-        from rclpy.serialization import serialize_message  # rclpy only where rclpy messages are used
+        """
+        Serialize an rclpy message and write it.
+
+        The topic is added with the message's type if new.
+        """
+        from rclpy.serialization import (  # rclpy only where rclpy messages are used
+            serialize_message,
+        )
+
         name = qualify_topic(topic)
         if name not in self._channels:
             self.add_topic(name, type_name_of(msg))
         self.write(name, serialize_message(msg), log_time_ns)
 
-    def add_attachment(self, name: str, data: bytes, media_type: str = 'application/octet-stream',
-                       log_time_ns: int = 0, create_time_ns: int = 0) -> None:
+    def add_attachment(
+        self,
+        name: str,
+        data: bytes,
+        media_type: str = 'application/octet-stream',
+        log_time_ns: int = 0,
+        create_time_ns: int = 0,
+    ) -> None:
         """Write an MCAP attachment record (repair copies a damaged file's attachments)."""
         with self._mutating():
-            self._writer.add_attachment(create_time=int(create_time_ns), log_time=int(log_time_ns), name=str(name),
-                                        media_type=str(media_type), data=bytes(data))
+            self._writer.add_attachment(
+                create_time=int(create_time_ns),
+                log_time=int(log_time_ns),
+                name=str(name),
+                media_type=str(media_type),
+                data=bytes(data),
+            )
 
     def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
         """Write an MCAP metadata record (string keys and values), e.g. the scene a run used."""
@@ -245,14 +341,21 @@ class BagWriter:
             self._writer.add_metadata(name, {str(k): str(v) for k, v in metadata.items()})
 
     def flush(self) -> None:
-        """Close the open chunk and push everything to the OS (a later hard kill cannot lose it)."""
+        """
+        Close the open chunk and push everything to the OS.
+
+        A later hard kill cannot lose it.
+        """
         if not self._closed:
             with self._mutating():
                 self._flush_locked()
 
     def flush_if_due(self) -> None:
-        """flush() if the oldest unflushed message is about flush_period_s old (the writer's own
-        background thread calls this too; a timer calling it is harmless)."""
+        """
+        Call flush() if the oldest unflushed message is about flush_period_s old.
+
+        The writer's own background thread calls this too; a timer calling it is harmless.
+        """
         if not self._closed and self._flush_due(time.monotonic()):
             with self._mutating():
                 if self._flush_due(time.monotonic()):
@@ -269,9 +372,13 @@ class BagWriter:
         with self._lock:
             if self._closed:
                 return
-            self._busy_thread = threading.get_ident()  # a signal landing now is deferred, not re-entrant
+            self._busy_thread = (
+                threading.get_ident()
+            )  # a signal landing now is deferred, not re-entrant
             try:
-                self._writer.add_metadata('rosbag2', {'serialized_metadata': self._rosbag2_metadata()})
+                self._writer.add_metadata(
+                    'rosbag2', {'serialized_metadata': self._rosbag2_metadata()}
+                )
                 self._writer.finish()
                 self._file.flush()
                 os.fsync(self._file.fileno())
@@ -290,7 +397,11 @@ class BagWriter:
             raise BagError(f'bag {str(self.path)!r} is closed')
 
     def _rosbag2_metadata(self) -> str:
-        """The `rosbag2_bagfile_information` YAML rosbag2 (metadata version 9) stores in the file."""
+        """
+        Return the `rosbag2_bagfile_information` YAML that rosbag2 stores in the file.
+
+        Metadata version 9.
+        """
         start = self._first_ns or 0
         duration = (self._last_ns - start) if self._last_ns is not None else 0
         total = sum(self._counts.values())
@@ -298,40 +409,67 @@ class BagWriter:
         for name, info in self._topic_info.items():
             try:
                 qos = yaml.safe_load(info['qos']) if info['qos'] else []
-            except yaml.YAMLError:   # text copied from a damaged file by repair: keep it as text
+            except yaml.YAMLError:  # text copied from a damaged file by repair: keep it as text
                 qos = info['qos']
-            topics.append({'topic_metadata': {'name': name, 'type': info['type'], 'serialization_format': 'cdr',
-                                              'offered_qos_profiles': qos, 'type_description_hash': info['hash']},
-                           'message_count': self._counts[name]})
-        data = {'rosbag2_bagfile_information': {
-            'version': 9,
-            'storage_identifier': 'mcap',
-            'duration': {'nanoseconds': duration},
-            'starting_time': {'nanoseconds_since_epoch': start},
-            'message_count': total,
-            'topics_with_message_count': topics,
-            'compression_format': '',
-            'compression_mode': '',
-            'relative_file_paths': [self.path.name],
-            'files': [{'path': self.path.name, 'starting_time': {'nanoseconds_since_epoch': start},
-                       'duration': {'nanoseconds': duration}, 'message_count': total}],
-            'custom_data': {'writer': LIBRARY,
-                            'closed_at': datetime.datetime.now(datetime.timezone.utc).isoformat()},
-            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
-        }}
+            topics.append(
+                {
+                    'topic_metadata': {
+                        'name': name,
+                        'type': info['type'],
+                        'serialization_format': 'cdr',
+                        'offered_qos_profiles': qos,
+                        'type_description_hash': info['hash'],
+                    },
+                    'message_count': self._counts[name],
+                }
+            )
+        data = {
+            'rosbag2_bagfile_information': {
+                'version': 9,
+                'storage_identifier': 'mcap',
+                'duration': {'nanoseconds': duration},
+                'starting_time': {'nanoseconds_since_epoch': start},
+                'message_count': total,
+                'topics_with_message_count': topics,
+                'compression_format': '',
+                'compression_mode': '',
+                'relative_file_paths': [self.path.name],
+                'files': [
+                    {
+                        'path': self.path.name,
+                        'starting_time': {'nanoseconds_since_epoch': start},
+                        'duration': {'nanoseconds': duration},
+                        'message_count': total,
+                    }
+                ],
+                'custom_data': {
+                    'writer': LIBRARY,
+                    'closed_at': datetime.datetime.now(datetime.timezone.utc).isoformat(),
+                },
+                'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+            }
+        }
         return yaml.safe_dump(data, sort_keys=False)
 
 
 def _flush_loop(ref: Callable[[], BagWriter | None], stop: threading.Event, tick_s: float) -> None:
-    """Background flusher: wakes every tick_s and flushes a writer whose oldest unflushed message
-    is due; ends when the writer is closed or garbage-collected."""
+    """
+    Flush in the background: wake every tick_s and flush a writer whose oldest message is due.
+
+    The oldest unflushed message is the one that counts. Ends when the writer is closed or
+    garbage-collected.
+    """
     while not stop.wait(tick_s):
         writer = ref()
         if writer is None or writer._closed:
             return
         try:
             writer.flush_if_due()
-        except (BagError, ValueError, OSError):   # closed meanwhile, or the disk is gone: close() reports it
+        except (
+            BagError,
+            ValueError,
+            OSError,
+        ):  # closed meanwhile, or the disk is gone: close() reports it
             return
         finally:
             del writer
@@ -344,14 +482,19 @@ def _weak_close(writer: BagWriter) -> Callable[[], None]:
         w = ref()
         if w is not None:
             w.close()
+
     return close
 
 
 def _redeliver(signum: int, handler: Any = None) -> None:
-    """Act on signum as the handler in place before ours would have (KeyboardInterrupt for SIGINT,
-    termination for SIGTERM), so the process exits the way it would have without the bag. A Python
-    handler is called here, synchronously: re-raising the signal from inside a handler would only
-    queue it, and the interrupted code would run on against the closed bag first."""
+    """
+    Act on signum as the handler in place before ours would have.
+
+    That is KeyboardInterrupt for SIGINT, termination for SIGTERM, so the process exits the way it
+    would have without the bag. A Python handler is called here, synchronously: re-raising the
+    signal from inside a handler would only queue it, and the interrupted code would run on against
+    the closed bag first.
+    """
     if callable(handler):
         handler(signum, None)
     else:
@@ -359,8 +502,12 @@ def _redeliver(signum: int, handler: Any = None) -> None:
 
 
 def qos_profiles_yaml(profiles: Iterable[Any]) -> str:
-    """rosbag2's `offered_qos_profiles` YAML for rclpy QoSProfile objects (e.g. from
-    node.get_publishers_info_by_topic(t)[i].qos_profile); '' for none."""
+    """
+    Return rosbag2's `offered_qos_profiles` YAML for rclpy QoSProfile objects; '' for none.
+
+    The objects come e.g. from node.get_publishers_info_by_topic(t)[i].qos_profile.
+    """
+
     def duration(d: Any) -> dict[str, int]:
         ns = int(getattr(d, 'nanoseconds', 0))
         if ns <= 0 or ns >= 2**63 - 1:  # infinite / unset: rosbag2 writes RMW_DURATION_INFINITE
@@ -370,18 +517,28 @@ def qos_profiles_yaml(profiles: Iterable[Any]) -> str:
     def policy(p: Any) -> str:
         return getattr(p, 'name', str(p)).lower()
 
-    items = [{
-        'history': policy(p.history), 'depth': int(p.depth), 'reliability': policy(p.reliability),
-        'durability': policy(p.durability), 'deadline': duration(p.deadline), 'lifespan': duration(p.lifespan),
-        'liveliness': policy(p.liveliness), 'liveliness_lease_duration': duration(p.liveliness_lease_duration),
-        'avoid_ros_namespace_conventions': bool(p.avoid_ros_namespace_conventions),
-    } for p in profiles]
+    items = [
+        {
+            'history': policy(p.history),
+            'depth': int(p.depth),
+            'reliability': policy(p.reliability),
+            'durability': policy(p.durability),
+            'deadline': duration(p.deadline),
+            'lifespan': duration(p.lifespan),
+            'liveliness': policy(p.liveliness),
+            'liveliness_lease_duration': duration(p.liveliness_lease_duration),
+            'avoid_ros_namespace_conventions': bool(p.avoid_ros_namespace_conventions),
+        }
+        for p in profiles
+    ]
     return yaml.safe_dump(items, sort_keys=False).strip() if items else ''
 
 
-def install_signal_handlers(writer: BagWriter,
-                            signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> Callable[[], None]:
-    """Close `writer` on SIGINT/SIGTERM, then let the signal act as before (KeyboardInterrupt, exit).
+def install_signal_handlers(
+    writer: BagWriter, signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)
+) -> Callable[[], None]:
+    """
+    Close `writer` on SIGINT/SIGTERM, then let the signal act as before (KeyboardInterrupt, exit).
 
     Call from the main thread. If the signal lands while this thread is inside writer.write(), the
     close is deferred to the end of that write so no record is cut in half. Returns a function

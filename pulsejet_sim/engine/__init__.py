@@ -1,2 +1,5 @@
-"""The ROS-free engine: the live session (pacing, held commands, watchdog, health) that sim_node,
-the offline runner and the tests drive."""
+"""
+The ROS-free engine: the live session (pacing, held commands, watchdog, health).
+
+sim_node, the offline runner and the tests drive it.
+"""

@@ -1,4 +1,5 @@
-"""Publication at the wall time a state belongs to, on a thread of its own (no ROS import).
+"""
+Publication at the wall time a state belongs to, on a thread of its own (no ROS import).
 
 With a lookahead (`SessionConfig.lookahead_s`) the physics computes states ahead of the wall clock;
 the node builds each state's messages at once (so they hold that state, not a later one) and puts
@@ -8,6 +9,7 @@ the period of the wall grid. Batches run in the order they were put; `flush` run
 batch at once (before a state that is published immediately: a pause, a reset, a changed pacing)
 so the order of publications never inverts and nothing computed is lost.
 """
+
 from __future__ import annotations
 
 import collections

@@ -1,7 +1,9 @@
-"""The live engine without ROS: a `Simulation`, the command it holds, the watchdog, the duration,
-the pacing and the health numbers. It never publishes: every call returns *events* (a state to
-publish, an applied command, a log line, a fault) and `sim_node` turns them into messages; tests
-drive it with a fake wall clock.
+"""
+The live engine without ROS.
+
+A `Simulation`, the command it holds, the watchdog, the duration, the pacing and the health
+numbers. It never publishes: every call returns *events* (a state to publish, an applied command, a
+log line, a fault) and `sim_node` turns them into messages; tests drive it with a fake wall clock.
 
 Pacing modes (`PACING_MODES`):
 - ``real_time``: physics steps follow the wall clock times ``real_time_factor`` on a drift-free
@@ -18,15 +20,16 @@ Pacing modes (`PACING_MODES`):
 Every publication carries the state at a multiple of the physics step: the session always
 advances whole publication periods (``publish_every`` steps) on the grid of simulated time.
 """
+
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
+import math
 from typing import Optional
 
 from pulsejet_sim.interface import SERVICE_PAUSE, SERVICE_RESET, SERVICE_STEP
-from pulsejet_sim.models.base import Command, CommandError, SimulationBlowUp, check_command_value
+from pulsejet_sim.models.base import check_command_value, Command, CommandError, SimulationBlowUp
 
 PACING_MODES = ('real_time', 'as_fast_as_possible', 'lockstep', 'closed_loop')
 WATCHDOG_ACTIONS = ('safe', 'hold')
@@ -36,7 +39,7 @@ SAFE_COMMAND = Command(pump_flow_m3_s=0.0, valve_opening=1.0, cable_force_n=0.0)
 LEDGER_RATE_HZ = 5.0
 HOLD_REPUBLISH_S = 0.5
 MAX_CATCH_UP_PERIODS = 5
-DROP_LOG_PERIOD_S = 10.0     # at most one "fell behind" log line per this many wall seconds
+DROP_LOG_PERIOD_S = 10.0  # at most one "fell behind" log line per this many wall seconds
 AFAP_BUDGET = 0.8
 RTF_WARN_FRACTION = 0.9
 STABLE_MARGIN_WARN = 1.0
@@ -50,8 +53,12 @@ OK, WARN, ERROR = 'OK', 'WARN', 'ERROR'
 # -- events ---------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Publish:
-    """Publish this observation (and the mantle profile); with ``ledger`` also the energy ledger.
-    ``due_wall``: with a lookahead, the wall time the state belongs to (publish it then, not now)."""
+    """
+    Publish this observation (and the mantle profile); with ``ledger`` also the energy ledger.
+
+    ``due_wall``: with a lookahead, the wall time the state belongs to (publish it then, not now).
+    """
+
     observation: object
     ledger: bool = False
     due_wall: Optional[float] = None
@@ -60,6 +67,7 @@ class Publish:
 @dataclass(frozen=True)
 class Applied:
     """The command held from ``time_s`` on (what re-simulation replays)."""
+
     command: Command
     time_s: float
 
@@ -71,13 +79,14 @@ class PublishLedger:
 
 @dataclass(frozen=True)
 class Log:
-    level: str      # 'info' | 'warning' | 'error'
+    level: str  # 'info' | 'warning' | 'error'
     text: str
 
 
 @dataclass(frozen=True)
 class Halted:
     """The physics stopped (blow-up or non-finite state): publish an ERROR diagnostic."""
+
     cause: str
 
 
@@ -90,11 +99,13 @@ def observation_is_finite(obs) -> bool:
 
 
 class Pacer:
-    """Wall clock -> number of physics steps due, without drift.
+    """
+    Wall clock -> number of physics steps due, without drift.
 
     steps_due(now) = floor((now - t0) * rtf / dt) - steps_done, capped at max_steps per call; when
     the cap bites, t0 is moved forward so the lost time is not caught up later (no burst), and the
-    wall time so skipped is counted in ``dropped_s``."""
+    wall time so skipped is counted in ``dropped_s``.
+    """
 
     def __init__(self, dt_s: float, real_time_factor: float, max_steps: int, now: float):
         self.dt_s = dt_s
@@ -124,6 +135,7 @@ class Pacer:
 @dataclass
 class Window:
     """Counters over one health period."""
+
     wall0: float
     sim0: float
     physics_s: float = 0.0
@@ -141,18 +153,24 @@ class SessionConfig:
     watchdog_timeout_s: float = 0.0
     watchdog_action: str = 'safe'
     watchdog_clock: str = 'sim'
-    control_period_s: float = 0.0      # closed_loop: 0 = one publication period
+    control_period_s: float = 0.0  # closed_loop: 0 = one publication period
     #: real_time: simulated seconds the physics runs ahead of publication, so a slow step (a hard
-    #: Newton solve) delays no state; each state is published at its own wall time (Publish.due_wall).
-    #: Commands then act up to this much later. 0 = publish each state as soon as it is computed.
+    #: Newton solve) delays no state; each state is published at its own wall time
+    #: (Publish.due_wall). Commands then act up to this much later. 0 = publish each state as soon
+    #: as it is computed.
     lookahead_s: float = 0.0
     paused: bool = False
 
 
 @dataclass
 class Session:
-    """See the module docstring. Every call takes ``now``, the wall time in seconds (time.monotonic in
-    the node, a fake clock in tests); ``physics_clock`` times the physics (time.perf_counter)."""
+    """
+    The live session: see the module docstring.
+
+    Every call takes ``now``, the wall time in seconds (time.monotonic in the node, a fake clock in
+    tests); ``physics_clock`` times the physics (time.perf_counter).
+    """
+
     sim: object
     config: SessionConfig
     now: float
@@ -164,7 +182,7 @@ class Session:
     awaiting_command: bool = False
     publications: int = 0
     dropped_wall_s: float = 0.0
-    physics_s_total: float = 0.0     # wall seconds spent in the physics since the start
+    physics_s_total: float = 0.0  # wall seconds spent in the physics since the start
     steps_total: int = 0
     _pacer: Optional[Pacer] = None
     _window: Window = None
@@ -177,11 +195,15 @@ class Session:
     _deferring: bool = False
     events: list = field(default_factory=list)
     #: commands since the start: accepted, rejected (a bad value or message; the node logs them
-    #: throttled, so these counts are the full record) and stale (closed-loop answers to old states)
-    command_counts: dict = field(default_factory=lambda: {'accepted': 0, 'rejected': 0, 'stale': 0})
+    #: throttled, so these counts are the full record) and stale (closed-loop answers to old
+    #: states)
+    command_counts: dict = field(
+        default_factory=lambda: {'accepted': 0, 'rejected': 0, 'stale': 0}
+    )
 
     def __post_init__(self):
         import time
+
         self.physics_clock = self.physics_clock or time.perf_counter
         self.dt_s = float(self.sim.model.dt_s)
         self.command = self.sim.command
@@ -201,7 +223,11 @@ class Session:
 
     @property
     def control_steps(self) -> int:
-        """Physics steps of one closed-loop control period (a whole number of publication periods)."""
+        """
+        Physics steps of one closed-loop control period.
+
+        A whole number of publication periods.
+        """
         period = self.config.control_period_s or self.publish_every * self.dt_s
         return max(1, int(round(period / self.dt_s)))
 
@@ -209,17 +235,25 @@ class Session:
         if self._pacer is not None:
             self.dropped_wall_s += self._pacer.dropped_s
         # the pacer counts publication periods, so that every state lies on the physics step's grid
-        max_periods = (max(1, int(math.ceil(MAX_CATCH_UP_PERIODS * self.config.real_time_factor)))
-                       + self._lookahead_periods())
-        self._pacer = Pacer(self.dt_s * self.publish_every, self.config.real_time_factor, max_periods, now)
+        max_periods = (
+            max(1, int(math.ceil(MAX_CATCH_UP_PERIODS * self.config.real_time_factor)))
+            + self._lookahead_periods()
+        )
+        self._pacer = Pacer(
+            self.dt_s * self.publish_every, self.config.real_time_factor, max_periods, now
+        )
         self._window.free_running = False
 
     def _lookahead_periods(self) -> int:
         return int(math.ceil(self.config.lookahead_s / (self.dt_s * self.publish_every) - 1e-9))
 
     def dropped_s(self) -> float:
-        """Wall seconds of real_time pacing that were not simulated (the physics or the machine
-        could not keep up): the sim fell behind by that much and did not catch up."""
+        """
+        Return the wall seconds of real_time pacing that were not simulated.
+
+        The physics or the machine could not keep up: the sim fell behind by that much and did not
+        catch up.
+        """
         return self.dropped_wall_s + (self._pacer.dropped_s if self._pacer else 0.0)
 
     # -- life -----------------------------------------------------------------------------------
@@ -239,7 +273,7 @@ class Session:
         return self._take()
 
     def tick(self, now: float) -> list:
-        """One pacing tick (the node calls it at publish_rate_hz of wall time)."""
+        """Run one pacing tick; the node calls this at publish_rate_hz of wall time."""
         if self.done or not self.started or self.sim.fault is not None:
             return self._take()
         self._wall_watchdog(now)
@@ -261,9 +295,14 @@ class Session:
         due = self._pacer.steps_due(now + self.config.lookahead_s / self.config.real_time_factor)
         if self._pacer.dropped_s > dropped and now - self._last_drop_log >= DROP_LOG_PERIOD_S:
             self._last_drop_log = now
-            self._emit(Log('warning', f'fell behind real time (factor {self.config.real_time_factor:g}): '
-                                      f'{self.dropped_s():.3f} s of wall time dropped so far, not caught up; '
-                                      f'the physics alone runs at {self.physics_cost_rtf():.3g}x real time'))
+            self._emit(
+                Log(
+                    'warning',
+                    f'fell behind real time (factor {self.config.real_time_factor:g}): '
+                    f'{self.dropped_s():.3f} s of wall time dropped so far, not caught up; '
+                    f'the physics alone runs at {self.physics_cost_rtf():.3g}x real time',
+                )
+            )
         if due > 0:
             self._deferring = self.config.lookahead_s > 0
             try:
@@ -275,16 +314,28 @@ class Session:
 
     def _wall(self) -> float:
         import time
+
         return time.monotonic()
 
     def physics_cost_rtf(self) -> float:
-        """Simulated seconds per second of physics compute since the start (nan before any step)."""
-        return (self.steps_total * self.dt_s / self.physics_s_total) if self.physics_s_total > 0 else float('nan')
+        """
+        Return the simulated seconds per second of physics compute since the start.
+
+        nan before any step.
+        """
+        return (
+            (self.steps_total * self.dt_s / self.physics_s_total)
+            if self.physics_s_total > 0
+            else float('nan')
+        )
 
     # -- stepping -------------------------------------------------------------------------------
     def _run_periods(self, periods: int) -> bool:
-        """Advance ``periods`` publication periods, publishing the state after each; False after
-        a fault."""
+        """
+        Advance ``periods`` publication periods, publishing the state after each.
+
+        False after a fault.
+        """
         for _ in range(periods):
             steps0 = self.sim.steps
             if not self._run_steps(self.publish_every):
@@ -296,8 +347,11 @@ class Session:
         return True
 
     def _run_steps(self, n: int, publish: bool = True) -> bool:
-        """Advance up to n steps (capped by the duration) holding the command, split at the watchdog
-        deadline, then publish the state. False after a blow-up (the physics stops)."""
+        """
+        Advance up to n steps (capped by the duration) holding the command, then publish the state.
+
+        The run is split at the watchdog deadline. False after a blow-up (the physics stops).
+        """
         if self.config.duration_s > 0:
             n = min(n, max(0, int(round((self.config.duration_s - self.sim.time_s) / self.dt_s))))
         obs = None
@@ -327,7 +381,7 @@ class Session:
             if ledger:
                 self._publish_applied(self.command)
             due_wall = None
-            if self._deferring:   # the wall time of the period being completed (the pacer's grid)
+            if self._deferring:  # the wall time of the period being completed (the pacer's grid)
                 pacer = self._pacer
                 due_wall = pacer.t0 + (pacer.steps_done + 1) * pacer.dt_s / pacer.rtf
             self._emit(Publish(obs, ledger=ledger, due_wall=due_wall))
@@ -346,17 +400,31 @@ class Session:
         if d > 0 and not self.done and self.sim.time_s >= d - 0.5 * self.dt_s:
             self._emit(PublishLedger(self.sim.time_s))
             lag = self.dropped_s()
-            self._emit(Log('info', f'duration {d:g} s of simulated time reached'
-                           + (f' ({lag:.3f} s of wall time dropped: the run was not kept in real time)'
-                              if lag > 0 else '') + '; exiting'))
+            self._emit(
+                Log(
+                    'info',
+                    f'duration {d:g} s of simulated time reached'
+                    + (
+                        f' ({lag:.3f} s of wall time dropped: the run was not kept in real time)'
+                        if lag > 0
+                        else ''
+                    )
+                    + '; exiting',
+                )
+            )
             self.done = True
 
     def _halt(self, cause: str):
         self.exit_code = 1
         self._window.free_running = False
         self.awaiting_command = False
-        self._emit(Log('error', f'physics blew up: {cause}; stopped stepping at t={self.sim.time_s:.6f} s '
-                                f'(last good state kept, nothing more is published; {SERVICE_RESET} restarts)'))
+        self._emit(
+            Log(
+                'error',
+                f'physics blew up: {cause}; stopped stepping at t={self.sim.time_s:.6f} s '
+                f'(last good state kept, nothing more is published; {SERVICE_RESET} restarts)',
+            )
+        )
         self._emit(Halted(cause))
         if self.config.duration_s > 0:
             self.done = True
@@ -366,18 +434,29 @@ class Session:
         self._emit(Applied(command, self.sim.time_s))
 
     # -- commands and watchdog ------------------------------------------------------------------
-    def accept(self, values: dict, now: float, stamp_s: float | None = None, source: str = 'command') -> list:
-        """Apply a command: ``values`` maps Command fields to numbers, all checked first and applied
-        together at the current step (or none, if one is bad: CommandError names it). In closed_loop
-        pacing a command that answers the awaited state releases the next control period."""
-        stale = (self.config.pacing == 'closed_loop' and stamp_s is not None
-                 and stamp_s < self.sim.time_s - 0.5 * self.dt_s)
+    def accept(
+        self, values: dict, now: float, stamp_s: float | None = None, source: str = 'command'
+    ) -> list:
+        """
+        Apply a command: ``values`` maps Command fields to numbers.
+
+        All are checked first and applied together at the current step (or none, if one is bad:
+        CommandError names it). In closed_loop pacing a command that answers the awaited state
+        releases the next control period.
+        """
+        stale = (
+            self.config.pacing == 'closed_loop'
+            and stamp_s is not None
+            and stamp_s < self.sim.time_s - 0.5 * self.dt_s
+        )
         checked = {}
         try:
             for name, value in values.items():
                 if name not in Command.LIMITS:
-                    raise CommandError(f'{source}: {name!r} is not a command field; allowed: '
-                                       f'{", ".join(Command.LIMITS)}')
+                    raise CommandError(
+                        f'{source}: {name!r} is not a command field; allowed: '
+                        f'{", ".join(Command.LIMITS)}'
+                    )
                 low, high = Command.LIMITS[name]
                 checked[name] = check_command_value(name, value, low, high)
         except CommandError:
@@ -394,9 +473,16 @@ class Session:
         self._last_command_wall = now
         if self.watchdog_tripped:
             self.watchdog_tripped = False
-            self._emit(Log('info', f'command watchdog cleared by {source} at t={self.sim.time_s:.4f} s'))
-        if (self.config.pacing == 'closed_loop' and self.awaiting_command and self.started and not self.paused
-                and (stamp_s is None or stamp_s >= self.sim.time_s - 0.5 * self.dt_s)):
+            self._emit(
+                Log('info', f'command watchdog cleared by {source} at t={self.sim.time_s:.4f} s')
+            )
+        if (
+            self.config.pacing == 'closed_loop'
+            and self.awaiting_command
+            and self.started
+            and not self.paused
+            and (stamp_s is None or stamp_s >= self.sim.time_s - 0.5 * self.dt_s)
+        ):
             self._closed_loop_period()
         return self._take()
 
@@ -410,21 +496,31 @@ class Session:
             self.awaiting_command = True
 
     def command_age_s(self) -> float:
-        """Simulated seconds since the last accepted command (or the start / reset)."""
+        """Return the simulated seconds since the last accepted command (or the start / reset)."""
         return (self.sim.steps - self._last_command_steps) * self.dt_s
 
     def _watchdog_chunk(self, n: int) -> int:
-        if self.config.watchdog_timeout_s <= 0.0 or self.watchdog_tripped or self.config.watchdog_clock != 'sim':
+        if (
+            self.config.watchdog_timeout_s <= 0.0
+            or self.watchdog_tripped
+            or self.config.watchdog_clock != 'sim'
+        ):
             return n
-        limit = self._last_command_steps + max(1, int(math.ceil(self.config.watchdog_timeout_s / self.dt_s - 1e-9)))
+        limit = self._last_command_steps + max(
+            1, int(math.ceil(self.config.watchdog_timeout_s / self.dt_s - 1e-9))
+        )
         if self.sim.steps >= limit:
             self._trip_watchdog(f'{self.command_age_s():.3f} s of simulated time')
             return n
         return min(n, limit - self.sim.steps)
 
     def _wall_watchdog(self, now: float):
-        if (self.config.watchdog_timeout_s > 0.0 and self.config.watchdog_clock == 'wall' and not self.watchdog_tripped
-                and now - self._last_command_wall > self.config.watchdog_timeout_s):
+        if (
+            self.config.watchdog_timeout_s > 0.0
+            and self.config.watchdog_clock == 'wall'
+            and not self.watchdog_tripped
+            and now - self._last_command_wall > self.config.watchdog_timeout_s
+        ):
             self._trip_watchdog(f'{now - self._last_command_wall:.3f} s of wall time')
 
     def _trip_watchdog(self, age: str):
@@ -434,33 +530,48 @@ class Session:
             what = 'applying the safe command (pump off, valve open, cable released)'
         else:
             what = f'holding the last command {self.command}'
-        self._emit(Log('warning', f'command watchdog tripped at t={self.sim.time_s:.4f} s: no command for {age} '
-                                  f'(timeout {self.config.watchdog_timeout_s:g} s); {what}'))
+        self._emit(
+            Log(
+                'warning',
+                f'command watchdog tripped at t={self.sim.time_s:.4f} s: no command for {age} '
+                f'(timeout {self.config.watchdog_timeout_s:g} s); {what}',
+            )
+        )
 
     # -- requests -------------------------------------------------------------------------------
     def configure(self, name: str, value, now: float) -> list:
-        """A live parameter change (already validated by the node)."""
+        """Apply a live parameter change (already validated by the node)."""
         old = getattr(self.config, name)
         setattr(self.config, name, value)
         if name in ('real_time_factor', 'pacing') and value != old and self._pacer is not None:
             self._reanchor(now)
         if name == 'pacing' and value != old:
-            self.awaiting_command = value == 'closed_loop' and self.started and self.sim.fault is None
+            self.awaiting_command = (
+                value == 'closed_loop' and self.started and self.sim.fault is None
+            )
             if self.awaiting_command:
-                self._emit(Publish(self.sim.observe()))   # the state the controller answers next
+                self._emit(Publish(self.sim.observe()))  # the state the controller answers next
         if name == 'watchdog_timeout_s' and value == 0.0:
             self.watchdog_tripped = False
         return self._take()
 
     def pause(self, flag: bool, now: float) -> tuple[bool, str, list]:
         if flag:
-            msg = ('already paused' if self.paused else 'paused') + f' at t={self.sim.time_s:.6f} s'
+            msg = (
+                'already paused' if self.paused else 'paused'
+            ) + f' at t={self.sim.time_s:.6f} s'
             self.paused = True
             self._window.free_running = False
             return True, msg, self._take()
         if self.config.pacing == 'lockstep':
-            return False, ('not resumed: pacing is lockstep, simulated time advances only through '
-                           f'{SERVICE_STEP}; set pacing to real_time or as_fast_as_possible to run freely'), self._take()
+            return (
+                False,
+                (
+                    'not resumed: pacing is lockstep, simulated time advances only through '
+                    f'{SERVICE_STEP}; set pacing to real_time or as_fast_as_possible to run freely'
+                ),
+                self._take(),
+            )
         was = self.paused
         self.paused = False
         if self._pacer is not None:
@@ -472,13 +583,23 @@ class Session:
 
     def step(self, now: float) -> tuple[bool, str, list]:
         if self.sim.fault is not None:
-            message = f'refused: the physics is stopped after a fault ({self.sim.fault}); call {SERVICE_RESET}'
+            message = (
+                f'refused: the physics is stopped after a fault ({self.sim.fault}); '
+                f'call {SERVICE_RESET}'
+            )
             return False, message, self._take()
         if self.done:
             return False, f'refused: duration_s={self.config.duration_s:g} s reached', self._take()
         if self.config.pacing not in ('lockstep', 'closed_loop') and not self.paused:
-            return False, (f'refused: the simulation is running (pacing {self.config.pacing}); pause it with '
-                           f'{SERVICE_PAUSE} first or set pacing to lockstep'), self._take()
+            return (
+                False,
+                (
+                    f'refused: the simulation is running (pacing {self.config.pacing}); pause it '
+                    'with '
+                    f'{SERVICE_PAUSE} first or set pacing to lockstep'
+                ),
+                self._take(),
+            )
         if not self.started:
             self._begin(now)
         steps0 = self.sim.steps
@@ -486,8 +607,15 @@ class Session:
         if self._pacer is not None:
             self._reanchor(now)
         done = self.sim.steps - steps0
-        return ok, (f'advanced {done} steps to t={self.sim.time_s:.6f} s' if ok else
-                    f'physics blew up after {done} steps: {self.sim.fault}'), self._take()
+        return (
+            ok,
+            (
+                f'advanced {done} steps to t={self.sim.time_s:.6f} s'
+                if ok
+                else f'physics blew up after {done} steps: {self.sim.fault}'
+            ),
+            self._take(),
+        )
 
     def reset(self, now: float) -> tuple[str, list]:
         t_before, fault = self.sim.time_s, self.sim.fault
@@ -504,10 +632,18 @@ class Session:
         self._publish_applied(self.command)
         self._emit(Publish(obs, ledger=True))
         self.awaiting_command = self.config.pacing == 'closed_loop' and self.started
-        self._emit(Log('info', f'reset at t={t_before:.6f} s' + (f' (clearing the fault: {fault})' if fault else '')
-                       + '; simulation time back to 0'))
-        return (f'reset to the initial state: simulation time back to 0 from t={t_before:.6f} s'
-                + (', fault cleared' if fault else '')), self._take()
+        self._emit(
+            Log(
+                'info',
+                f'reset at t={t_before:.6f} s'
+                + (f' (clearing the fault: {fault})' if fault else '')
+                + '; simulation time back to 0',
+            )
+        )
+        return (
+            f'reset to the initial state: simulation time back to 0 from t={t_before:.6f} s'
+            + (', fault cleared' if fault else '')
+        ), self._take()
 
     # -- health ---------------------------------------------------------------------------------
     def run_state(self) -> str:
@@ -522,77 +658,123 @@ class Session:
         return 'paused' if self.paused else 'running'
 
     def health(self, now: float) -> tuple[str, str, dict]:
-        """(level OK|WARN|ERROR, message, key -> value) over the window since the last call (resets it)."""
+        """
+        Return (level OK|WARN|ERROR, message, key -> value) over the window since the last call.
+
+        The call resets the window.
+        """
         w = self._window
         wall = max(now - w.wall0, 1e-9)
         achieved = (self.sim.time_s - w.sim0) / wall
         state = self.run_state()
         cfg = self.config
-        lag = self._pacer.lag_s(now) if (self._pacer is not None and state == 'running'
-                                         and cfg.pacing == 'real_time') else 0.0
+        lag = (
+            self._pacer.lag_s(now)
+            if (self._pacer is not None and state == 'running' and cfg.pacing == 'real_time')
+            else 0.0
+        )
         try:
             margin = float(self.sim.stable_step_s()) / self.dt_s
-        except Exception:   # a model that cannot estimate it at this state
+        except Exception:  # a model that cannot estimate it at this state
             margin = float('nan')
         ledger = self.sim.energy_ledger()
         closure_j = float(ledger.get('closure_error', float('nan')))
-        in_play = (abs(float(ledger.get('in_initial', 0.0))) + abs(float(ledger.get('in_actuation_work', 0.0)))
-                   + sum(abs(float(v)) for k, v in ledger.items() if k.startswith('stored_')))
+        in_play = (
+            abs(float(ledger.get('in_initial', 0.0)))
+            + abs(float(ledger.get('in_actuation_work', 0.0)))
+            + sum(abs(float(v)) for k, v in ledger.items() if k.startswith('stored_'))
+        )
         closure = closure_j / in_play if in_play > CLOSURE_FLOOR_J else 0.0
         age = self.command_age_s()
         values = {
-            'state': state, 'pacing': cfg.pacing,
+            'state': state,
+            'pacing': cfg.pacing,
             'real_time_factor_requested': cfg.real_time_factor,
             'real_time_factor_achieved': achieved,
             'physics_real_time_factor': self.physics_cost_rtf(),
             'physics_us_per_step': (w.physics_s / w.steps * 1e6) if w.steps else float('nan'),
             'steps_in_window': w.steps,
-            'lag_s': lag, 'dropped_wall_s': self.dropped_s(),
+            'lag_s': lag,
+            'dropped_wall_s': self.dropped_s(),
             'stable_step_margin': margin,
-            'energy_closure_relative': closure, 'energy_closure_j': closure_j,
+            'energy_closure_relative': closure,
+            'energy_closure_j': closure_j,
             'command_age_s': age,
             'command_age_wall_s': now - self._last_command_wall,
             **{f'commands_{k}': n for k, n in self.command_counts.items()},
-            'watchdog': ('off' if cfg.watchdog_timeout_s <= 0 else
-                         f'tripped ({cfg.watchdog_action})' if self.watchdog_tripped else 'armed'),
+            'watchdog': (
+                'off'
+                if cfg.watchdog_timeout_s <= 0
+                else f'tripped ({cfg.watchdog_action})' if self.watchdog_tripped else 'armed'
+            ),
             'watchdog_clock': cfg.watchdog_clock,
             'watchdog_timeout_s': cfg.watchdog_timeout_s,
             'awaiting_command': self.awaiting_command,
-            'time_s': self.sim.time_s, 'steps': self.sim.steps,
+            'time_s': self.sim.time_s,
+            'steps': self.sim.steps,
             'fault': self.sim.fault or '',
         }
         warn = []
         if self.watchdog_tripped:
-            warn.append(f'command watchdog tripped (timeout {cfg.watchdog_timeout_s:g} s, {cfg.watchdog_clock} time), '
-                        + ('safe command applied' if cfg.watchdog_action == 'safe' else 'last command held'))
+            warn.append(
+                f'command watchdog tripped (timeout {cfg.watchdog_timeout_s:g} s, '
+                f'{cfg.watchdog_clock} time), '
+                + (
+                    'safe command applied'
+                    if cfg.watchdog_action == 'safe'
+                    else 'last command held'
+                )
+            )
         if math.isfinite(closure) and abs(closure) > CLOSURE_WARN_RELATIVE:
-            warn.append(f'energy closure {closure:+.2%} of the energy in play ({closure_j:+.3g} J) exceeds '
-                        f'{CLOSURE_WARN_RELATIVE:.0%}')
+            warn.append(
+                f'energy closure {closure:+.2%} of the energy in play ({closure_j:+.3g} J) '
+                'exceeds '
+                f'{CLOSURE_WARN_RELATIVE:.0%}'
+            )
         integrator = str(getattr(self.sim.model, 'integrator', 'explicit'))
         values['integrator'] = integrator
         implicit = 'implicit' in integrator or 'backward' in integrator
         if math.isfinite(margin) and margin < STABLE_MARGIN_WARN and not implicit:
             warn.append(f'step above the stable step (margin {margin:.3g})')
-        if (w.free_running and state == 'running' and cfg.pacing == 'real_time' and wall > 0.5
-                and achieved < RTF_WARN_FRACTION * cfg.real_time_factor):
+        if (
+            w.free_running
+            and state == 'running'
+            and cfg.pacing == 'real_time'
+            and wall > 0.5
+            and achieved < RTF_WARN_FRACTION * cfg.real_time_factor
+        ):
             physics = self.physics_cost_rtf()
-            cause = ('the physics cannot keep up' if math.isfinite(physics) and physics < cfg.real_time_factor
-                     else f'the machine did not schedule the node in time (the physics alone runs at '
-                          f'{physics:.3g}x real time)')
-            warn.append(f'real-time factor {achieved:.3g} below the requested {cfg.real_time_factor:g}: {cause}; '
-                        f'{self.dropped_s():.3f} s of wall time dropped so far')
+            cause = (
+                'the physics cannot keep up'
+                if math.isfinite(physics) and physics < cfg.real_time_factor
+                else f'the machine did not schedule the node in time (the physics alone runs at '
+                f'{physics:.3g}x real time)'
+            )
+            warn.append(
+                f'real-time factor {achieved:.3g} below the requested {cfg.real_time_factor:g}: '
+                f'{cause}; '
+                f'{self.dropped_s():.3f} s of wall time dropped so far'
+            )
         if self.sim.fault is not None:
             level, message = ERROR, f'physics stopped: {self.sim.fault}'
         elif warn:
             level, message = WARN, '; '.join(warn)
         else:
             level = OK
-            message = {'running': f'running ({cfg.pacing}'
-                       + (f' x{cfg.real_time_factor:g}' if cfg.pacing == 'real_time' else '')
-                       + f', achieved x{achieved:.3g})',
-                       'paused': 'paused', 'lockstep': 'lockstep: waiting for step requests',
-                       'closed_loop': 'closed loop: ' + ('waiting for the controller\'s command'
-                                                         if self.awaiting_command else 'stepping'),
-                       'waiting': 'waiting for subscribers', 'done': 'duration reached'}.get(state, state)
+            message = {
+                'running': f'running ({cfg.pacing}'
+                + (f' x{cfg.real_time_factor:g}' if cfg.pacing == 'real_time' else '')
+                + f', achieved x{achieved:.3g})',
+                'paused': 'paused',
+                'lockstep': 'lockstep: waiting for step requests',
+                'closed_loop': 'closed loop: '
+                + (
+                    "waiting for the controller's command"
+                    if self.awaiting_command
+                    else 'stepping'
+                ),
+                'waiting': 'waiting for subscribers',
+                'done': 'duration reached',
+            }.get(state, state)
         self._window = Window(now, self.sim.time_s, free_running=(state == 'running'))
         return level, message, values

@@ -1,8 +1,10 @@
-"""One lumped pump/valve robot (paper 001) as a gymnasium environment.
+"""
+One lumped pump/valve robot (paper 001) as a gymnasium environment.
 
 Action (SI, ``Box`` within ``Command.LIMITS``): ``[pump flow command (m^3/s), valve opening command
 (0 shut .. 1 open)]``, held for one control period (``control_period_s``, default 0.05 s, a whole
-number of the scene's physics steps). Out-of-range actions are clipped (``info['action_clipped']``).
+number of the scene's physics steps). Out-of-range actions are clipped
+(``info['action_clipped']``).
 
 Observation (SI, ``Box``): ``[vehicle speed U (m/s), minor semi-axis b (m), db/dt (m/s), fluid
 volume in the cavity (m^3), actual pump flow (m^3/s), actual valve opening (0..1)]``.
@@ -10,29 +12,35 @@ volume in the cavity (m^3), actual pump flow (m^3/s), actual valve opening (0..1
 Reward: ``reward=`` one of ``pulsejet_sim.envs.rewards.REWARDS`` (definitions there).
 Termination: a fault of the physics (``SimulationBlowUp``: a bound or a non-finite value) ends the
 episode with ``terminated=True``, reward ``-fault_penalty`` and ``info['fault']`` (the message);
-the observation is the last good state (never NaN). Truncation: ``max_episode_s`` of simulated time.
-Seeding: ``reset(seed=...)`` draws the initial minor semi-axis ``b(0) (1 + u)``, ``u`` uniform in
-``[-initial_b_jitter, initial_b_jitter]`` (0: the scene's exact state), so a seed fixes the episode.
-The model, its integrator and its terms come from the scene (``scene_overrides`` merged in, e.g.
-``{'simulation': {'integrator': 'adaptive'}}``).
+the observation is the last good state (never NaN). Truncation: ``max_episode_s`` of simulated
+time. Seeding: ``reset(seed=...)`` draws the initial minor semi-axis ``b(0) (1 + u)``, ``u``
+uniform in ``[-initial_b_jitter, initial_b_jitter]`` (0: the scene's exact state), so a seed fixes
+the episode. The model, its integrator and its terms come from the scene (``scene_overrides``
+merged in, e.g. ``{'simulation': {'integrator': 'adaptive'}}``).
 """
+
 from __future__ import annotations
 
 import math
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 from gymnasium import spaces
-
+import numpy as np
 from pulsejet_sim.envs import rewards as R
 from pulsejet_sim.models import lumped_kernels as K
 from pulsejet_sim.models.base import Command, SimulationBlowUp
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.simulation import Simulation
 
-OBS_NAMES = ('speed_m_s', 'minor_semi_axis_m', 'minor_semi_axis_rate_m_s', 'volume_m3', 'pump_flow_m3_s',
-             'valve_opening')
+OBS_NAMES = (
+    'speed_m_s',
+    'minor_semi_axis_m',
+    'minor_semi_axis_rate_m_s',
+    'volume_m3',
+    'pump_flow_m3_s',
+    'valve_opening',
+)
 ACTION_NAMES = ('pump_flow_m3_s', 'valve_opening')
 
 
@@ -41,7 +49,9 @@ def lumped_observation(Y: np.ndarray, params: np.ndarray) -> np.ndarray:
     a = params[..., K.P_A]
     b = Y[..., K.Y_B]
     volume = 4.0 / 3.0 * math.pi * a * b * b - params[..., K.P_V_SOLID]
-    return np.stack([Y[..., K.Y_U], b, Y[..., K.Y_W], volume, Y[..., K.Y_QP], Y[..., K.Y_VALVE]], axis=-1)
+    return np.stack(
+        [Y[..., K.Y_U], b, Y[..., K.Y_W], volume, Y[..., K.Y_QP], Y[..., K.Y_VALVE]], axis=-1
+    )
 
 
 def lumped_spaces(params: np.ndarray) -> tuple[spaces.Box, spaces.Box]:
@@ -50,7 +60,9 @@ def lumped_spaces(params: np.ndarray) -> tuple[spaces.Box, spaces.Box]:
     v_lo, v_hi = Command.LIMITS['valve_opening']
     action = spaces.Box(np.array([q_lo, v_lo]), np.array([q_hi, v_hi]), dtype=np.float64)
     v_max = 4.0 / 3.0 * math.pi * a * params[K.P_B_MAX] ** 2
-    low = np.array([-params[K.P_U_MAX], params[K.P_B_MIN], -np.inf, -params[K.P_V_SOLID], -q_hi, 0.0])
+    low = np.array(
+        [-params[K.P_U_MAX], params[K.P_B_MIN], -np.inf, -params[K.P_V_SOLID], -q_hi, 0.0]
+    )
     high = np.array([params[K.P_U_MAX], params[K.P_B_MAX], np.inf, v_max, q_hi, 1.0])
     return spaces.Box(low, high, dtype=np.float64), action
 
@@ -63,30 +75,47 @@ def lumped_mass_kg(params: np.ndarray) -> float:
 
 def steps_per_period(control_period_s: float, dt_s: float) -> int:
     if not (math.isfinite(control_period_s) and control_period_s > 0):
-        raise ValueError(f'control_period_s={control_period_s!r} rejected; allowed: a positive number of seconds')
+        raise ValueError(
+            f'control_period_s={control_period_s!r} rejected; allowed: a positive number of '
+            'seconds'
+        )
     n = int(round(control_period_s / dt_s))
     if n < 1 or abs(n * dt_s - control_period_s) > 1e-9 * max(1.0, control_period_s):
-        raise ValueError(f'control_period_s={control_period_s!r} rejected; allowed: a whole multiple of the '
-                         f'physics step dt_s={dt_s:g} s')
+        raise ValueError(
+            f'control_period_s={control_period_s!r} rejected; allowed: a whole multiple of the '
+            f'physics step dt_s={dt_s:g} s'
+        )
     return n
 
 
 class LumpedPumpValveEnv(gym.Env):
     metadata = {'render_modes': []}
 
-    def __init__(self, scene: str = 'pump_cycle', scene_overrides: dict | None = None,
-                 control_period_s: float = 0.05, max_episode_s: float = 10.0, reward: str = 'distance',
-                 target_speed_m_s: float = 0.2, fault_penalty: float = 100.0, initial_b_jitter: float = 0.02,
-                 cot_min_distance_m: float = 0.01):
+    def __init__(
+        self,
+        scene: str = 'pump_cycle',
+        scene_overrides: dict | None = None,
+        control_period_s: float = 0.05,
+        max_episode_s: float = 10.0,
+        reward: str = 'distance',
+        target_speed_m_s: float = 0.2,
+        fault_penalty: float = 100.0,
+        initial_b_jitter: float = 0.02,
+        cot_min_distance_m: float = 0.01,
+    ):
         self.scene = load_scene(scene, scene_overrides)
         self.model = self.scene.model
         if self.model.name != 'lumped':
-            raise ValueError(f'scene {scene!r} is a {self.model.name} scene; allowed: a lumped scene')
+            raise ValueError(
+                f'scene {scene!r} is a {self.model.name} scene; allowed: a lumped scene'
+            )
         self.reward_name = R.check_reward(reward)
         self.n_steps = steps_per_period(control_period_s, self.model.dt_s)
         self.control_period_s = self.n_steps * self.model.dt_s
         if not (max_episode_s > 0 and math.isfinite(max_episode_s)):
-            raise ValueError(f'max_episode_s={max_episode_s!r} rejected; allowed: a positive number of seconds')
+            raise ValueError(
+                f'max_episode_s={max_episode_s!r} rejected; allowed: a positive number of seconds'
+            )
         if not 0.0 <= initial_b_jitter < 0.5:
             raise ValueError(f'initial_b_jitter={initial_b_jitter!r} rejected; allowed: [0, 0.5)')
         self.max_periods = int(math.ceil(max_episode_s / self.control_period_s - 1e-9))
@@ -109,9 +138,10 @@ class LumpedPumpValveEnv(gym.Env):
         if self.initial_b_jitter > 0.0:
             u = self.np_random.uniform(-self.initial_b_jitter, self.initial_b_jitter)
             self.sim.state[K.Y_B] *= 1.0 + u
-            if self.sim.state[K.Y_VALVE] <= 0.0:   # a sealed cavity moves only with the pump
+            if self.sim.state[K.Y_VALVE] <= 0.0:  # a sealed cavity moves only with the pump
                 self.sim.state[K.Y_W] = self.sim.state[K.Y_QP] / (
-                    8.0 / 3.0 * math.pi * self.model.params[K.P_A] * self.sim.state[K.Y_B])
+                    8.0 / 3.0 * math.pi * self.model.params[K.P_A] * self.sim.state[K.Y_B]
+                )
             self.sim.initial_state = self.sim.state.copy()
         self.periods = 0
         return self._obs(), {'time_s': 0.0, 'position_m': 0.0}
@@ -134,13 +164,27 @@ class LumpedPumpValveEnv(gym.Env):
         if terminated:
             reward = -self.fault_penalty
         else:
-            reward = float(R.reward(self.reward_name, x0=x0, x1=float(y[K.Y_X]), x_start=0.0, work0=w0,
-                                    work1=float(y[K.Y_W_PUMP]), period_s=self.control_period_s,
-                                    mass_kg=self.mass_kg, target_speed_m_s=self.target_speed_m_s,
-                                    d_min_m=self.cot_min_distance_m))
+            reward = float(
+                R.reward(
+                    self.reward_name,
+                    x0=x0,
+                    x1=float(y[K.Y_X]),
+                    x_start=0.0,
+                    work0=w0,
+                    work1=float(y[K.Y_W_PUMP]),
+                    period_s=self.control_period_s,
+                    mass_kg=self.mass_kg,
+                    target_speed_m_s=self.target_speed_m_s,
+                    d_min_m=self.cot_min_distance_m,
+                )
+            )
         truncated = (not terminated) and self.periods >= self.max_periods
-        info.update(time_s=self.periods * self.control_period_s, position_m=float(y[K.Y_X]),
-                    actuation_work_j=float(y[K.Y_W_PUMP]),
-                    cost_of_transport=float(R.cost_of_transport(y[K.Y_W_PUMP], y[K.Y_X], self.mass_kg,
-                                                                self.cot_min_distance_m)))
+        info.update(
+            time_s=self.periods * self.control_period_s,
+            position_m=float(y[K.Y_X]),
+            actuation_work_j=float(y[K.Y_W_PUMP]),
+            cost_of_transport=float(
+                R.cost_of_transport(y[K.Y_W_PUMP], y[K.Y_X], self.mass_kg, self.cot_min_distance_m)
+            ),
+        )
         return self._obs(), reward, terminated, truncated, info

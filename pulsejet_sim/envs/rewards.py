@@ -1,5 +1,7 @@
-"""Rewards of the pulsejet environments (all SI), chosen by name. Each works on arrays, so the
-single and the vector environments share it.
+"""
+Rewards of the pulsejet environments (all SI), chosen by name.
+
+Each works on arrays, so the single and the vector environments share it.
 
 - ``distance``: metres swum forward during the control period, ``x(t+T) - x(t)``.
 - ``mean_speed``: mean forward speed over the control period, ``(x(t+T) - x(t)) / T`` (m/s).
@@ -12,6 +14,7 @@ single and the vector environments share it.
 - ``track_speed``: minus the absolute error of the mean speed over the period against
   ``target_speed_m_s`` (m/s).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -30,14 +33,22 @@ def cost_of_transport(work_j, distance_m, mass_kg, d_min_m):
     return np.asarray(work_j) / (mass_kg * G * np.maximum(distance_m, d_min_m))
 
 
-def reward(name: str, *, x0, x1, x_start, work0, work1, period_s, mass_kg, target_speed_m_s, d_min_m):
-    """Reward of one control period (arrays or floats): positions before/after (m), the episode's
-    start position, actuation work before/after (J)."""
+def reward(
+    name: str, *, x0, x1, x_start, work0, work1, period_s, mass_kg, target_speed_m_s, d_min_m
+):
+    """
+    Return the reward of one control period (arrays or floats).
+
+    Inputs: positions before/after (m), the episode's start position, actuation work before/after
+    (J).
+    """
     if name == 'distance':
         return x1 - x0
     if name == 'mean_speed':
         return (x1 - x0) / period_s
     if name == 'track_speed':
         return -np.abs((x1 - x0) / period_s - target_speed_m_s)
-    return -(cost_of_transport(work1, x1 - x_start, mass_kg, d_min_m)
-             - cost_of_transport(work0, x0 - x_start, mass_kg, d_min_m))
+    return -(
+        cost_of_transport(work1, x1 - x_start, mass_kg, d_min_m)
+        - cost_of_transport(work0, x0 - x_start, mass_kg, d_min_m)
+    )

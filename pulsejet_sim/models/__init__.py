@@ -1,4 +1,5 @@
 """Physics models (no ROS). ``build_model(scene_dict)`` compiles what a scene asks for."""
+
 from __future__ import annotations
 
 from typing import Any, Mapping
@@ -8,11 +9,13 @@ from pulsejet_sim.models.base import ModelError
 
 def _lumped(data):
     from pulsejet_sim.models.lumped import LumpedModel
+
     return LumpedModel.from_scene(data)
 
 
 def _shell(data):
     from pulsejet_sim.models.shell import ShellModel
+
     return ShellModel.from_scene(data)
 
 
@@ -22,5 +25,7 @@ MODEL_BUILDERS = {'lumped': _lumped, 'shell': _shell}
 def build_model(data: Mapping[str, Any]):
     kind = data.get('model')
     if kind not in MODEL_BUILDERS:
-        raise ModelError(f'model: {kind!r} is not a known model; allowed: one of {", ".join(MODEL_BUILDERS)}')
+        raise ModelError(
+            f'model: {kind!r} is not a known model; allowed: one of {", ".join(MODEL_BUILDERS)}'
+        )
     return MODEL_BUILDERS[kind](data)

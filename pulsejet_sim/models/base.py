@@ -1,17 +1,26 @@
 """Types shared by every model: commands in, observations out, and the errors. No ROS here."""
+
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
 import math
 import numbers
-from dataclasses import dataclass, fields
 
 
 class ModelError(ValueError):
-    """A model or scene parameter that cannot be simulated (names the value and what is allowed)."""
+    """
+    A model or scene parameter that cannot be simulated.
+
+    The message names the value and what is allowed.
+    """
 
 
 class SimulationBlowUp(RuntimeError):
-    """The state became non-finite or left its physical bounds; the physics stopped at the last good step."""
+    """
+    The state became non-finite or left its physical bounds.
+
+    The physics stopped at the last good step.
+    """
 
     def __init__(self, message: str, time_s: float):
         super().__init__(message)
@@ -26,9 +35,13 @@ class CommandError(ValueError):
 class Command:
     """Actuation command held constant over a batch of physics steps."""
 
-    pump_flow_m3_s: float = 0.0   # volume flow the pump pushes into the cavity through the bow inlet
-    valve_opening: float = 1.0    # 0 shut .. 1 fully open stern nozzle
-    cable_force_n: float = 0.0    # cable pull on the mantle (shell model); the lumped model ignores it
+    pump_flow_m3_s: float = (
+        0.0  # volume flow the pump pushes into the cavity through the bow inlet
+    )
+    valve_opening: float = 1.0  # 0 shut .. 1 fully open stern nozzle
+    cable_force_n: float = (
+        0.0  # cable pull on the mantle (shell model); the lumped model ignores it
+    )
 
     # allowed ranges, checked by validate(): (low, high)
     LIMITS = {
@@ -38,9 +51,12 @@ class Command:
     }
 
     def validate(self) -> 'Command':
-        """This command with every value a float in its range (self when it already is one), or
-        CommandError naming the first bad value and the allowed range (NaN, inf, text, booleans,
-        None and out-of-range values are refused)."""
+        """
+        Return this command with every value a float in its range (self when it already is one).
+
+        Otherwise CommandError naming the first bad value and the allowed range (NaN, inf, text,
+        booleans, None and out-of-range values are refused).
+        """
         values = {}
         for f in fields(self):
             low, high = self.LIMITS[f.name]
@@ -53,21 +69,29 @@ class Command:
 def check_command_value(name: str, value: float, low: float, high: float) -> float:
     """Return value as float, or raise CommandError naming the value and the allowed range."""
     if isinstance(value, (bool, str, bytes)) or not isinstance(value, numbers.Real):
-        raise CommandError(f'{name}={value!r} is not a number; allowed: a finite value in [{low}, {high}]')
+        raise CommandError(
+            f'{name}={value!r} is not a number; allowed: a finite value in [{low}, {high}]'
+        )
     try:
         v = float(value)
     except (TypeError, ValueError, OverflowError):
-        raise CommandError(f'{name}={value!r} is not a number; allowed: a finite value in [{low}, {high}]') from None
+        raise CommandError(
+            f'{name}={value!r} is not a number; allowed: a finite value in [{low}, {high}]'
+        ) from None
     if not math.isfinite(v) or v < low or v > high:
-        raise CommandError(f'{name}={value!r} rejected; allowed: a finite value in [{low}, {high}]')
+        raise CommandError(
+            f'{name}={value!r} rejected; allowed: a finite value in [{low}, {high}]'
+        )
     if name == 'valve_opening' and 0.0 < v < VALVE_MIN_OPENING:
         # a pin-hole opening makes the orifice loss overflow (1/opening^2): shut or a real opening
-        raise CommandError(f'{name}={value!r} rejected; allowed: 0 (shut) or a finite value in '
-                           f'[{VALVE_MIN_OPENING:g}, {high}]')
+        raise CommandError(
+            f'{name}={value!r} rejected; allowed: 0 (shut) or a finite value in '
+            f'[{VALVE_MIN_OPENING:g}, {high}]'
+        )
     return v
 
 
-VALVE_MIN_OPENING = 1e-9    # smallest valve opening other than 0 (shut) a command may ask for
+VALVE_MIN_OPENING = 1e-9  # smallest valve opening other than 0 (shut) a command may ask for
 
 
 @dataclass(frozen=True)
@@ -75,16 +99,16 @@ class Observation:
     """What the simulator publishes at one instant (SI units)."""
 
     time_s: float
-    position_m: float            # vehicle axial position, forward +
+    position_m: float  # vehicle axial position, forward +
     velocity_m_s: float
     acceleration_m_s2: float
-    mantle_radius_m: float       # shell: radius at mid-meridian; lumped model: minor semi-axis b
-    volume_m3: float             # fluid volume in the cavity
+    mantle_radius_m: float  # shell: radius at mid-meridian; lumped model: minor semi-axis b
+    volume_m3: float  # fluid volume in the cavity
     fluid_mass_kg: float
-    thrust_n: float              # jet momentum thrust on the vehicle, forward +
-    added_mass_force_n: float    # -dm_x/dt * U, forward +
-    drag_n: float                # drag on the vehicle, forward + (negative while swimming forward)
-    jet_speed_m_s: float         # outflow speed relative to the nozzle (negative while water flows in)
-    cavity_pressure_pa: float    # gauge pressure at the nozzle inlet
-    pump_flow_m3_s: float        # actual pump flow (the pump has a spin-up lag)
-    valve_opening: float         # actual valve opening (the valve has a stroke lag)
+    thrust_n: float  # jet momentum thrust on the vehicle, forward +
+    added_mass_force_n: float  # -dm_x/dt * U, forward +
+    drag_n: float  # drag on the vehicle, forward + (negative while swimming forward)
+    jet_speed_m_s: float  # outflow speed relative to the nozzle (negative while water flows in)
+    cavity_pressure_pa: float  # gauge pressure at the nozzle inlet
+    pump_flow_m3_s: float  # actual pump flow (the pump has a spin-up lag)
+    valve_opening: float  # actual valve opening (the valve has a stroke lag)

@@ -1,21 +1,30 @@
-"""Lumped pulsed-jet model (paper 001): immutable parameters compiled from a scene, plus the
-Model-protocol methods that drive the numba kernels in ``lumped_kernels``.
+"""
+Lumped pulsed-jet model (paper 001).
+
+Immutable parameters compiled from a scene, plus the Model-protocol methods that drive the numba
+kernels in ``lumped_kernels``.
 
 The derivation, the choices where the paper is ambiguous and the energy ledger are in
 ``docs/PHYSICS_LUMPED.md``.
 """
+
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 from typing import Any, Mapping
 
 import numpy as np
-from scipy import integrate
-
 from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import VALVE_MIN_OPENING, Command, ModelError, Observation, SimulationBlowUp
-from pulsejet_sim.schema import Choice, Flag, Number, check_section
+from pulsejet_sim.models.base import (
+    Command,
+    ModelError,
+    Observation,
+    SimulationBlowUp,
+    VALVE_MIN_OPENING,
+)
+from pulsejet_sim.schema import check_section, Choice, Flag, Number
+from scipy import integrate
 
 TERM_BITS = {
     'shell_inertia': K.T_SHELL_INERTIA,
@@ -82,17 +91,17 @@ class DeprecatedAlias:
 
     of: str
     choices: tuple[str, ...]
-    default: str = ''              # '' = not given
+    default: str = ''  # '' = not given
 
     def check(self, key: str, value: Any) -> str:
         return Choice(None, self.choices).check(key, value)
 
 
 OPTIONS_SPEC = {
-    # how the shell and the vehicle are coupled: 'paper' = eqs. (1) and (3) of paper 001 as written,
-    # 'consistent' = the energy-consistent coupling (docs/PHYSICS_LUMPED.md)
+    # how the shell and the vehicle are coupled: 'paper' = eqs. (1) and (3) of paper 001 as
+    # written, 'consistent' = the energy-consistent coupling (docs/PHYSICS_LUMPED.md)
     'coupling': Choice('consistent', COUPLINGS),
-    'energy_model': DeprecatedAlias('coupling', COUPLINGS),   # deprecated name of 'coupling'
+    'energy_model': DeprecatedAlias('coupling', COUPLINGS),  # deprecated name of 'coupling'
     'added_mass_form': Choice('exact', ('exact', 'simplified')),
     'simplified_added_mass_coefficient': Number(0.45, 0.0, 10.0, unit=''),
 }
@@ -118,7 +127,7 @@ _BLOWUP_CAUSES = {
 def internal_added_mass_kg(rho: float, a: float, x_e: float) -> float:
     """Paper's eq. 7: m_b = 4 pi/9 rho a^3 int_{-1}^{x_e} (1+x)^3 (2-x)^2 / (1-x) dx."""
     value, _ = integrate.quad(lambda x: (1 + x) ** 3 * (2 - x) ** 2 / (1 - x), -1.0, x_e)
-    return 4.0 * math.pi / 9.0 * rho * a ** 3 * value
+    return 4.0 * math.pi / 9.0 * rho * a**3 * value
 
 
 def spheroid_area_m2(a: float, b: float) -> float:
@@ -128,12 +137,17 @@ def spheroid_area_m2(a: float, b: float) -> float:
 
 
 def wall_inertia_kg(rho_s: float, thickness: float, a: float, b: float) -> float:
-    """Kinetic energy of the wall over b'^2/2 when every section radius R scales with b:
-    I_b = rho_s t int (R/b)^2 dS, taken at the rest shape (the wall is light next to m_b)."""
+    """
+    Return the kinetic energy of the wall over b'^2/2 when every section radius R scales with b.
+
+    I_b = rho_s t int (R/b)^2 dS, taken at the rest shape (the wall is light next to m_b).
+    """
+
     def integrand(x):
         r = b * math.sqrt(max(1.0 - x * x / (a * a), 0.0))
         drdx = -b * x / (a * a * math.sqrt(max(1.0 - x * x / (a * a), 1e-300)))
         return (1.0 - x * x / (a * a)) * 2.0 * math.pi * r * math.sqrt(1.0 + drdx * drdx)
+
     value, _ = integrate.quad(integrand, -a, a, limit=200)
     return rho_s * thickness * value
 
@@ -158,31 +172,53 @@ class LumpedModel:
     def from_scene(cls, scene: Mapping[str, Any]) -> 'LumpedModel':
         unknown = [k for k in scene if k != 'model' and k not in SECTION_SPECS]
         if unknown:
-            raise ModelError(f'{unknown[0]}: unknown section for the lumped model; allowed: model, name, '
-                             f'description, routine, {", ".join(SECTION_SPECS)}')
-        sections = {name: check_section(name, scene.get(name), spec) for name, spec in SECTION_SPECS.items()}
-        g, m, f, act = sections['geometry'], sections['material'], sections['fluid'], sections['actuator']
-        if 0.0 < act['initial_valve_opening'] < VALVE_MIN_OPENING:   # 1/opening^2 overflows in the orifice loss
-            raise ModelError(f'actuator.initial_valve_opening: {act["initial_valve_opening"]!r} is out of range; '
-                             f'allowed: 0 (shut) or a finite number in [{VALVE_MIN_OPENING:g}, 1]')
+            raise ModelError(
+                f'{unknown[0]}: unknown section for the lumped model; allowed: model, name, '
+                f'description, routine, {", ".join(SECTION_SPECS)}'
+            )
+        sections = {
+            name: check_section(name, scene.get(name), spec)
+            for name, spec in SECTION_SPECS.items()
+        }
+        g, m, f, act = (
+            sections['geometry'],
+            sections['material'],
+            sections['fluid'],
+            sections['actuator'],
+        )
+        if (
+            0.0 < act['initial_valve_opening'] < VALVE_MIN_OPENING
+        ):  # 1/opening^2 overflows in the orifice loss
+            raise ModelError(
+                f'actuator.initial_valve_opening: {act["initial_valve_opening"]!r} is out of '
+                'range; '
+                f'allowed: 0 (shut) or a finite number in [{VALVE_MIN_OPENING:g}, 1]'
+            )
         terms, opts = sections['terms'], sections['options']
         given_options = scene.get('options') or {}
         if opts['energy_model']:
             if 'coupling' in given_options and opts['coupling'] != opts['energy_model']:
-                raise ModelError(f'options.energy_model: {opts["energy_model"]!r} contradicts options.coupling: '
-                                 f'{opts["coupling"]!r}; allowed: only options.coupling (energy_model is its '
-                                 f'deprecated name), or both with the same value')
+                raise ModelError(
+                    f'options.energy_model: {opts["energy_model"]!r} contradicts '
+                    'options.coupling: '
+                    f'{opts["coupling"]!r}; allowed: only options.coupling (energy_model is its '
+                    f'deprecated name), or both with the same value'
+                )
             opts['coupling'] = opts['energy_model']
         opts['energy_model'] = opts['coupling']
         a = g['length_m'] / 2.0
         b0, b_init = g['rest_minor_semi_axis_m'], g['initial_minor_semi_axis_m']
         for key, value in (('rest_minor_semi_axis_m', b0), ('initial_minor_semi_axis_m', b_init)):
             if value >= 0.95 * a:
-                raise ModelError(f'geometry.{key}: {value!r} m is not a prolate ellipsoid; allowed: '
-                                 f'below 0.95 x the major semi-axis ({0.95 * a:g} m)')
+                raise ModelError(
+                    f'geometry.{key}: {value!r} m is not a prolate ellipsoid; allowed: '
+                    f'below 0.95 x the major semi-axis ({0.95 * a:g} m)'
+                )
         if not (terms['shell_inertia'] or terms['internal_added_mass'] or terms['nozzle_inertia']):
-            raise ModelError('terms: shell_inertia, internal_added_mass and nozzle_inertia are all false; '
-                             'allowed: at least one of them true (the shell needs inertia)')
+            raise ModelError(
+                'terms: shell_inertia, internal_added_mass and nozzle_inertia are all false; '
+                'allowed: at least one of them true (the shell needs inertia)'
+            )
         rho = f['density_kg_m3']
         r_n = g['nozzle_radius_m']
         p = np.zeros(K.NP)
@@ -191,7 +227,10 @@ class LumpedModel:
         p[K.P_A] = a
         p[K.P_B0] = b0
         p[K.P_K] = m['stiffness_n_m']
-        p[K.P_M_SOLID] = m['density_kg_m3'] * spheroid_area_m2(a, b0) * m['shell_thickness_m'] + m['payload_mass_kg']
+        p[K.P_M_SOLID] = (
+            m['density_kg_m3'] * spheroid_area_m2(a, b0) * m['shell_thickness_m']
+            + m['payload_mass_kg']
+        )
         p[K.P_I_B] = wall_inertia_kg(m['density_kg_m3'], m['shell_thickness_m'], a, b0)
         p[K.P_M_B] = internal_added_mass_kg(rho, a, g['nozzle_inlet_position'])
         p[K.P_L_N] = g['nozzle_length_m']
@@ -208,22 +247,29 @@ class LumpedModel:
         p[K.P_U_MAX] = 100.0
         k = m['stiffness_n_m']
 
-        def elastic_pressure(b_m):   # k (b - b0) / (dV/db), Pa
+        def elastic_pressure(b_m):  # k (b - b0) / (dV/db), Pa
             return k * (b_m - b0) / (8.0 / 3.0 * math.pi * a * b_m)
+
         relief = act['pump_relief_pressure_pa']
         stall = act['pump_stall_pressure_pa']
         relief = elastic_pressure(0.8 * a) if relief < 0 else relief
         stall = elastic_pressure(0.9 * a) if stall < 0 else stall
         limit = elastic_pressure(0.95 * a)
         if not relief < stall <= limit:
-            raise ModelError(f'actuator.pump_stall_pressure_pa: {stall!r} Pa with relief {relief!r} Pa; allowed: '
-                             f'relief < stall <= {limit:.6g} Pa (the elastic pressure of the shell at b = 0.95 a: a '
-                             f'stronger pump inflates it past its bound), or -1 for the defaults')
+            raise ModelError(
+                f'actuator.pump_stall_pressure_pa: {stall!r} Pa with relief {relief!r} Pa; '
+                'allowed: '
+                f'relief < stall <= {limit:.6g} Pa (the elastic pressure of the shell at b = 0.95 '
+                'a: a '
+                f'stronger pump inflates it past its bound), or -1 for the defaults'
+            )
         p[K.P_P_RELIEF] = relief
         p[K.P_P_STALL] = stall
         if g['solid_volume_m3'] >= 4.0 / 3.0 * math.pi * a * b0 * b0:
-            raise ModelError(f'geometry.solid_volume_m3: {g["solid_volume_m3"]!r} m^3 fills the rest cavity; '
-                             f'allowed: below {4.0 / 3.0 * math.pi * a * b0 * b0:.4g} m^3')
+            raise ModelError(
+                f'geometry.solid_volume_m3: {g["solid_volume_m3"]!r} m^3 fills the rest cavity; '
+                f'allowed: below {4.0 / 3.0 * math.pi * a * b0 * b0:.4g} m^3'
+            )
         flags = 0
         for name, bit in TERM_BITS.items():
             if terms[name]:
@@ -235,9 +281,18 @@ class LumpedModel:
         p.setflags(write=False)
         command = Command(act['initial_pump_flow_m3_s'], act['initial_valve_opening'], 0.0)
         sim = sections['simulation']
-        return cls(params=p, flags=flags, dt_s=sim['dt_s'], initial_b_m=b_init,
-                   initial_command=command, terms=frozenset(n for n in TERM_BITS if terms[n]),
-                   options=dict(opts), integrator=sim['integrator'], rtol=sim['rtol'], atol=sim['atol'])
+        return cls(
+            params=p,
+            flags=flags,
+            dt_s=sim['dt_s'],
+            initial_b_m=b_init,
+            initial_command=command,
+            terms=frozenset(n for n in TERM_BITS if terms[n]),
+            options=dict(opts),
+            integrator=sim['integrator'],
+            rtol=sim['rtol'],
+            atol=sim['atol'],
+        )
 
     # ---- Model protocol ------------------------------------------------------------------------
     def initial_state(self) -> np.ndarray:
@@ -251,7 +306,9 @@ class LumpedModel:
         if self.integrator == 'adaptive':
             # the step-size controller's memory travels with the state (K.M_*), after the NY slots
             mem = np.zeros(K.NMEM)
-            mem[K.M_Q] = mem[K.M_VALVE] = np.nan    # no previous command: the first call starts afresh
+            mem[K.M_Q] = mem[K.M_VALVE] = (
+                np.nan
+            )  # no previous command: the first call starts afresh
             y = np.concatenate([y, mem])
         return y
 
@@ -263,56 +320,102 @@ class LumpedModel:
             return int(n_steps)
         return self._advance_rk4(state, time_s, n_steps, command)
 
-    def advance_dense(self, state: np.ndarray, time_s: float, duration_s: float, command: Command,
-                      t_out: np.ndarray | None = None, rtol: float | None = None, atol: float | None = None):
-        """Advance `state` (in place) by duration_s holding `command` with the adaptive integrator,
-        and return (states at time_s + t_out, stats): t_out increasing offsets in (0, duration_s]
-        (the publication times), the states by the integrator's dense output, one row each (K.NY
+    def advance_dense(
+        self,
+        state: np.ndarray,
+        time_s: float,
+        duration_s: float,
+        command: Command,
+        t_out: np.ndarray | None = None,
+        rtol: float | None = None,
+        atol: float | None = None,
+    ):
+        """
+        Advance `state` (in place) by duration_s holding `command` with the adaptive integrator.
+
+        Returns (states at time_s + t_out, stats): t_out increasing offsets in (0, duration_s] (the
+        publication times), the states by the integrator's dense output, one row each (K.NY
         columns); stats: accepted and rejected steps, right-hand-side evaluations (K.S_*). Works on
         an rk4 model's state too (its controller then starts afresh every call). Raises
-        SimulationBlowUp with the state at the last accepted step."""
+        SimulationBlowUp with the state at the last accepted step.
+        """
         t_out = np.empty(0) if t_out is None else np.ascontiguousarray(t_out, dtype=float)
         out = np.empty((t_out.shape[0], K.NY))
         stats = np.zeros(K.NSTATS)
         if state.shape[0] >= K.NY + K.NMEM:
-            y = state[:K.NY]
-            mem = state[K.NY:K.NY + K.NMEM]
+            y = state[: K.NY]
+            mem = state[K.NY: K.NY + K.NMEM]
         else:
             y = state
             mem = np.zeros(K.NMEM)
             mem[K.M_Q] = mem[K.M_VALVE] = np.nan
-        args = (y, mem, self.params, float(command.pump_flow_m3_s), float(command.valve_opening),
-                float(duration_s), float(self.rtol if rtol is None else rtol),
-                float(self.atol if atol is None else atol), t_out, out, stats)
+        args = (
+            y,
+            mem,
+            self.params,
+            float(command.pump_flow_m3_s),
+            float(command.valve_opening),
+            float(duration_s),
+            float(self.rtol if rtol is None else rtol),
+            float(self.atol if atol is None else atol),
+            t_out,
+            out,
+            stats,
+        )
         # the first call per term set compiles (or loads) the specialisation on a zero-length copy
-        warm = (y.copy(), mem.copy(), *args[2:5], 0.0, *args[6:8], np.empty(0), np.empty((0, K.NY)),
-                np.zeros(K.NSTATS))
+        warm = (
+            y.copy(),
+            mem.copy(),
+            *args[2:5],
+            0.0,
+            *args[6:8],
+            np.empty(0),
+            np.empty((0, K.NY)),
+            np.zeros(K.NSTATS),
+        )
         status, written = K.specialised(K.adaptive_advance, self.flags, *warm)(self.flags, *args)
         if status != K.OK:
             t_fail = time_s + stats[K.S_T_DONE]
             raise SimulationBlowUp(
                 f'lumped model (adaptive) stopped at t={t_fail:.6f} s: {_BLOWUP_CAUSES[status]} '
                 f'(b={y[K.Y_B]:.6g} m, db/dt={y[K.Y_W]:.6g} m/s, U={y[K.Y_U]:.6g} m/s); '
-                f'the state is kept at the last accepted step', t_fail)
+                f'the state is kept at the last accepted step',
+                t_fail,
+            )
         return out[:written], stats
 
-    def _advance_rk4(self, state: np.ndarray, time_s: float, n_steps: int, command: Command) -> int:
-        args = (state, self.params, float(command.pump_flow_m3_s), float(command.valve_opening),
-                int(n_steps), self.dt_s)
-        done, status = K.specialised(K.advance, self.flags, *args[:4], 0, self.dt_s)(self.flags, *args) \
-            if n_steps > 0 else (0, K.OK)
+    def _advance_rk4(
+        self, state: np.ndarray, time_s: float, n_steps: int, command: Command
+    ) -> int:
+        args = (
+            state,
+            self.params,
+            float(command.pump_flow_m3_s),
+            float(command.valve_opening),
+            int(n_steps),
+            self.dt_s,
+        )
+        done, status = (
+            K.specialised(K.advance, self.flags, *args[:4], 0, self.dt_s)(self.flags, *args)
+            if n_steps > 0
+            else (0, K.OK)
+        )
         if status != K.OK:
             t_fail = time_s + (done + 1) * self.dt_s
             raise SimulationBlowUp(
                 f'lumped model stopped at t={t_fail:.6f} s: {_BLOWUP_CAUSES[status]} '
-                f'(b={state[K.Y_B]:.6g} m, db/dt={state[K.Y_W]:.6g} m/s, U={state[K.Y_U]:.6g} m/s); '
-                f'the state is kept at the last good step', time_s + done * self.dt_s)
+                f'(b={state[K.Y_B]:.6g} m, db/dt={state[K.Y_W]:.6g} m/s, U={state[K.Y_U]:.6g} '
+                'm/s); '
+                f'the state is kept at the last good step',
+                time_s + done * self.dt_s,
+            )
         return done
 
     def diagnostics(self, state: np.ndarray, command: Command) -> np.ndarray:
         diag = np.empty(K.ND)
         K.specialised(K.evaluate, self.flags, state, self.params, 0.0, diag)(
-            self.flags, state, self.params, float(command.pump_flow_m3_s), diag)
+            self.flags, state, self.params, float(command.pump_flow_m3_s), diag
+        )
         return diag
 
     def observe(self, state: np.ndarray, time_s: float, command: Command) -> Observation:
@@ -321,23 +424,38 @@ class LumpedModel:
         b = state[K.Y_B]
         volume = 4.0 / 3.0 * math.pi * p[K.P_A] * b * b - p[K.P_V_SOLID]
         return Observation(
-            time_s=time_s, position_m=float(state[K.Y_X]), velocity_m_s=float(state[K.Y_U]),
-            acceleration_m_s2=float(d[K.D_ACCEL]), mantle_radius_m=float(b), volume_m3=float(volume),
-            fluid_mass_kg=float(p[K.P_RHO] * volume), thrust_n=float(d[K.D_THRUST]),
-            added_mass_force_n=float(d[K.D_AMV_FORCE]), drag_n=float(d[K.D_DRAG]),
+            time_s=time_s,
+            position_m=float(state[K.Y_X]),
+            velocity_m_s=float(state[K.Y_U]),
+            acceleration_m_s2=float(d[K.D_ACCEL]),
+            mantle_radius_m=float(b),
+            volume_m3=float(volume),
+            fluid_mass_kg=float(p[K.P_RHO] * volume),
+            thrust_n=float(d[K.D_THRUST]),
+            added_mass_force_n=float(d[K.D_AMV_FORCE]),
+            drag_n=float(d[K.D_DRAG]),
             jet_speed_m_s=float(d[K.D_Q_N] / p[K.P_A_N]) if state[K.Y_VALVE] > 0 else 0.0,
-            cavity_pressure_pa=float(d[K.D_P_CAV]), pump_flow_m3_s=float(state[K.Y_QP]),
-            valve_opening=float(state[K.Y_VALVE]))
+            cavity_pressure_pa=float(d[K.D_P_CAV]),
+            pump_flow_m3_s=float(state[K.Y_QP]),
+            valve_opening=float(state[K.Y_VALVE]),
+        )
 
     def stored_energy(self, state: np.ndarray) -> tuple[float, float, float, float]:
         diag = np.empty(K.ND)
         return K.specialised(K.evaluate, self.flags, state, self.params, 0.0, diag)(
-            self.flags, state, self.params, 0.0, diag)
+            self.flags, state, self.params, 0.0, diag
+        )
 
-    def energy_ledger(self, state: np.ndarray, initial_state: np.ndarray | None = None) -> dict[str, float]:
-        """Energy books, J. ``created_*``: energy the applied equations create beyond the
-        energy-consistent ones (negative: destroy), each the integral of (applied - consistent
-        generalised force) x its velocity; never an input. closure = stored - in + out - created."""
+    def energy_ledger(
+        self, state: np.ndarray, initial_state: np.ndarray | None = None
+    ) -> dict[str, float]:
+        """
+        Return the energy books, J.
+
+        ``created_*``: energy the applied equations create beyond the energy-consistent ones
+        (negative: destroy), each the integral of (applied - consistent generalised force) x its
+        velocity; never an input. closure = stored - in + out - created.
+        """
         if initial_state is None:
             initial_state = self.initial_state()
         elastic, vehicle, outer, internal = self.stored_energy(state)
@@ -388,7 +506,11 @@ class LumpedModel:
 
     # ---- figures the paper reports -------------------------------------------------------------
     def fluid_stiffness_ratio(self, state: np.ndarray) -> float:
-        """k_x / k at this state (paper's Fig. 6), k_x from section 3.5 / eq. 10 in both couplings
-        (applied as k_x b only in the paper coupling)."""
+        """
+        Return k_x / k at this state (paper's Fig. 6).
+
+        k_x from section 3.5 / eq. 10 in both couplings (applied as k_x b only in the paper
+        coupling).
+        """
         _, k_x = K.fluid_stiffness_force(state[K.Y_B], state[K.Y_U], self.params)
         return float(k_x / self.params[K.P_K])

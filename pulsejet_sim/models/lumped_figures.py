@@ -1,11 +1,12 @@
-"""The figures paper 001 reports for its section 4.1 escape manoeuvre, measured on a lumped run.
+"""
+The figures paper 001 reports for its section 4.1 escape manoeuvre, measured on a lumped run.
 
 Definitions (fixed before any result; docs/PHYSICS_LUMPED.md, "Section 4.1 against the paper"):
 
 - window: t = 0 to the end of the first deflation, the first time b' returns to >= 0 after it went
   negative (the fluid mass's first minimum), or the end of the run if it never does;
-- added-mass share (primary): impulse share over the window, int F_amv dt / int (T + F_amv) dt, with
-  F_amv = -m_x' U (positive when it propels) and T the jet thrust (paper, section 4.2 and
+- added-mass share (primary): impulse share over the window, int F_amv dt / int (T + F_amv) dt,
+  with F_amv = -m_x' U (positive when it propels) and T the jet thrust (paper, section 4.2 and
   conclusions: "as much as 75% of the propulsive force", "75% of the total thrust generated";
   Fig. 7 plots thrust, added-mass-variation force and drag over the pulsation);
 - added-mass share (secondary): max_t F_amv / max_t (T + F_amv) over the window;
@@ -20,13 +21,13 @@ Definitions (fixed before any result; docs/PHYSICS_LUMPED.md, "Section 4.1 again
 Sampling: every physics step inside the window (trapezoidal impulses), then every
 `sample_period_s` (the same instants at every dt, so a run at dt/2 is comparable).
 """
+
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
+import math
 
 import numpy as np
-
 from pulsejet_sim.models import lumped_kernels as K
 from pulsejet_sim.models.base import SimulationBlowUp
 
@@ -35,17 +36,17 @@ from pulsejet_sim.models.base import SimulationBlowUp
 class Section41Figures:
     dt_s: float
     duration_s: float
-    blow_up_s: float | None          # time the run stopped on a bound, None if it ran to the end
-    blow_up_cause: str               # which bound stopped it ('' if none)
-    window_end_s: float              # end of the first deflation (or of the run)
-    deflation_90_s: float | None     # 90 % of the water above the rest volume out (None: never)
-    share_impulse: float             # primary added-mass share
-    share_peak: float                # secondary added-mass share
-    kx_over_k_max: float             # over the run
-    kx_over_k_window_max: float      # over the first deflation
+    blow_up_s: float | None  # time the run stopped on a bound, None if it ran to the end
+    blow_up_cause: str  # which bound stopped it ('' if none)
+    window_end_s: float  # end of the first deflation (or of the run)
+    deflation_90_s: float | None  # 90 % of the water above the rest volume out (None: never)
+    share_impulse: float  # primary added-mass share
+    share_peak: float  # secondary added-mass share
+    kx_over_k_max: float  # over the run
+    kx_over_k_window_max: float  # over the first deflation
     peak_speed_m_s: float
     fluid_mass_initial_kg: float
-    fluid_mass_settled_kg: float | None   # None when the run stopped early
+    fluid_mass_settled_kg: float | None  # None when the run stopped early
     fluid_mass_spread_kg: float | None
     fluid_mass_min_kg: float
     ledger: dict
@@ -59,8 +60,13 @@ def _fluid_mass(model, b: float) -> float:
     return float(p[K.P_RHO] * (4.0 / 3.0 * math.pi * p[K.P_A] * b * b - p[K.P_V_SOLID]))
 
 
-def section41_figures(model, duration_s: float = 20.0, settle_window_s: float = 3.0,
-                      sample_period_s: float = 0.01, max_window_s: float = 15.0) -> Section41Figures:
+def section41_figures(
+    model,
+    duration_s: float = 20.0,
+    settle_window_s: float = 3.0,
+    sample_period_s: float = 0.01,
+    max_window_s: float = 15.0,
+) -> Section41Figures:
     """Run `model` (a LumpedModel) from its initial state with its initial command and measure."""
     dt = model.dt_s
     command = model.initial_command
@@ -77,18 +83,26 @@ def section41_figures(model, duration_s: float = 20.0, settle_window_s: float = 
         return model.diagnostics(state, command)
 
     def kx_now():
-        # the paper's k_x (section 3.5, eq. 10) as a diagnostic, whether or not a coupling applies it
+        # the paper's k_x (section 3.5, eq. 10) as a diagnostic, whether or not a coupling applies
+        # it
         _, value = K.fluid_stiffness_force(state[K.Y_B], state[K.Y_U], model.params)
         return value
 
     d = sample()
-    times, thrust, amv, kx, speed, mass = [0.0], [d[K.D_THRUST]], [d[K.D_AMV_FORCE]], [kx_now()], \
-        [state[K.Y_U]], [_fluid_mass(model, state[K.Y_B])]
+    times, thrust, amv, kx, speed, mass = (
+        [0.0],
+        [d[K.D_THRUST]],
+        [d[K.D_AMV_FORCE]],
+        [kx_now()],
+        [state[K.Y_U]],
+        [_fluid_mass(model, state[K.Y_B])],
+    )
     step = 0
     went_negative = False
     window_end_step = None
     blow_up_s, cause = None, ''
     deflation_90 = None
+
     def record(t_s):
         d = sample()
         times.append(t_s)
@@ -120,7 +134,9 @@ def section41_figures(model, duration_s: float = 20.0, settle_window_s: float = 
         cause = str(err).split(': ', 1)[-1].split(' (')[0]
     t = np.array(times)
     thrust, amv, kx, speed, mass = (np.array(v) for v in (thrust, amv, kx, speed, mass))
-    n_window = (window_end_step if window_end_step is not None else min(step, max_window_steps)) + 1
+    n_window = (
+        window_end_step if window_end_step is not None else min(step, max_window_steps)
+    ) + 1
     tw, tw_thrust, tw_amv = t[:n_window], thrust[:n_window], amv[:n_window]
     impulse_amv = float(np.trapezoid(tw_amv, tw))
     impulse_total = float(np.trapezoid(tw_thrust + tw_amv, tw))
@@ -137,11 +153,20 @@ def section41_figures(model, duration_s: float = 20.0, settle_window_s: float = 
         settled, spread = float(late.mean()), float(late.max() - late.min())
     ledger = model.energy_ledger(state, initial)
     return Section41Figures(
-        dt_s=dt, duration_s=duration_s, blow_up_s=blow_up_s, blow_up_cause=cause,
-        window_end_s=float(tw[-1]), deflation_90_s=deflation_90,
+        dt_s=dt,
+        duration_s=duration_s,
+        blow_up_s=blow_up_s,
+        blow_up_cause=cause,
+        window_end_s=float(tw[-1]),
+        deflation_90_s=deflation_90,
         share_impulse=impulse_amv / impulse_total if impulse_total > 0 else float('nan'),
         share_peak=float(tw_amv.max() / (tw_thrust + tw_amv).max()),
-        kx_over_k_max=float(kx.max() / k), kx_over_k_window_max=float(kx[:n_window].max() / k),
-        peak_speed_m_s=float(speed.max()), fluid_mass_initial_kg=m0,
-        fluid_mass_settled_kg=settled, fluid_mass_spread_kg=spread, fluid_mass_min_kg=float(mass.min()),
-        ledger=ledger)
+        kx_over_k_max=float(kx.max() / k),
+        kx_over_k_window_max=float(kx[:n_window].max() / k),
+        peak_speed_m_s=float(speed.max()),
+        fluid_mass_initial_kg=m0,
+        fluid_mass_settled_kg=settled,
+        fluid_mass_spread_kg=spread,
+        fluid_mass_min_kg=float(mass.min()),
+        ledger=ledger,
+    )

@@ -1,5 +1,8 @@
-"""numba kernels of the lumped pulsed-jet model (paper 001, section 3): vehicle axial motion and the
-minor semi-axis ``b`` of an ellipsoidal shell, with the pump and the stern valve as inputs.
+"""
+numba kernels of the lumped pulsed-jet model (paper 001, section 3).
+
+Vehicle axial motion and the minor semi-axis ``b`` of an ellipsoidal shell, with the pump and the
+stern valve as inputs.
 
 Equations (see ``docs/PHYSICS_LUMPED.md`` for the derivation, the citations and the energy ledger).
 Coupling ``consistent`` (the default, energy-consistent)::
@@ -10,13 +13,15 @@ Coupling ``consistent`` (the default, energy-consistent)::
 Coupling ``paper`` (eqs. 1 and 3 of paper 001 as written)::
 
     vehicle:  (M + m_f + m_x) U' = T - D - m_x' U
-    shell:    (I_b + m_b + m_l) b'' = -k (b - b0) - k_x b + V_b (dp_visc + dp_valve) + Lambda V_b Q_p'
+    shell:    (I_b + m_b + m_l) b'' = -k (b - b0) - k_x b + V_b (dp_visc + dp_valve)
+                                      + Lambda V_b Q_p'
 
-with ``V_b = dV/db = 8/3 pi a b``, the nozzle flow ``Q_n = Q_p - V_b b'`` (continuity, positive out),
-the nozzle inertance ``Lambda = rho L_n / A_n`` (so ``m_l = Lambda V_b^2``, the paper's eq. 8), the
-pressure drop across the nozzle ``dp_n = dp_visc + dp_valve + dp_jet`` (laminar friction and inlet loss,
-i.e. the paper's ``c b'``; valve loss; the Bernoulli pressure that accelerates the jet), the outer
-flow's pull ``R_x = 1/2 dm_x/db U^2`` and the paper's fluid stiffness ``k_x`` (section 3.5, eq. 10).
+with ``V_b = dV/db = 8/3 pi a b``, the nozzle flow ``Q_n = Q_p - V_b b'`` (continuity, positive
+out), the nozzle inertance ``Lambda = rho L_n / A_n`` (so ``m_l = Lambda V_b^2``, the paper's eq.
+8), the pressure drop across the nozzle ``dp_n = dp_visc + dp_valve + dp_jet`` (laminar friction
+and inlet loss, i.e. the paper's ``c b'``; valve loss; the Bernoulli pressure that accelerates the
+jet), the outer flow's pull ``R_x = 1/2 dm_x/db U^2`` and the paper's fluid stiffness ``k_x``
+(section 3.5, eq. 10).
 
 The energy ledger books what the paper's equations create, each as the power of the difference
 between the applied and the energy-consistent generalised force (``Y_C_*``): the closure
@@ -30,12 +35,13 @@ State vector ``y`` (float64): see the ``Y_*`` indices. The energy ledger integra
 components, integrated by the same Runge-Kutta scheme as the motion, so the closure error of the
 ledger measures the integration error alone.
 """
+
 from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import literally, njit
+import numpy as np
 
 # ---- term bits --------------------------------------------------------------------------------
 T_SHELL_INERTIA = 1 << 0
@@ -49,55 +55,55 @@ T_FLUID_MASS = 1 << 7
 T_DRAG = 1 << 8
 T_JET_THRUST = 1 << 9
 # model options (also bits, so they are compiled in the same way)
-O_COUPLING_CONSISTENT = 1 << 16   # the shell pays for the jet: Bernoulli back pressure etc.
+O_COUPLING_CONSISTENT = 1 << 16  # the shell pays for the jet: Bernoulli back pressure etc.
 O_ADDED_MASS_SIMPLIFIED = 1 << 17  # m_x = C_1 rho 4/3 pi b^3 instead of Lamb's exact spheroid
 
 # ---- state indices ----------------------------------------------------------------------------
-Y_X = 0            # vehicle position, m
-Y_U = 1            # vehicle velocity, m/s
-Y_B = 2            # minor semi-axis, m
-Y_W = 3            # db/dt, m/s
-Y_QP = 4           # actual pump flow, m^3/s (first-order lag behind the command)
-Y_W_PUMP = 5       # ledger integrals, J
+Y_X = 0  # vehicle position, m
+Y_U = 1  # vehicle velocity, m/s
+Y_B = 2  # minor semi-axis, m
+Y_W = 3  # db/dt, m/s
+Y_QP = 4  # actual pump flow, m^3/s (first-order lag behind the command)
+Y_W_PUMP = 5  # ledger integrals, J
 Y_E_JET = 6
 Y_E_DRAG = 7
 Y_E_VISC = 8
-Y_E_VALVE = 9      # valve throttling loss plus the loss when the valve seals a moving flow
-Y_E_MIX = 10       # kinetic energy given to water drawn in (pump and nozzle inflow), then mixed
-# energy created by the applied equations beyond the energy-consistent ones (negative: destroyed), J;
-# each is int (applied - consistent generalised force) x its velocity dt
-Y_C_KX = 11        # the paper's k_x b: no reaction anywhere
-Y_C_JET = 12       # the Bernoulli pressure that the paper's shell does not pay for the jet
-Y_C_NOZZLE = 13    # the convective term 1/2 dm_l/db b'^2 of the b-dependent nozzle mass
-Y_C_AMV = 14       # the outer flow's pull R_x that pays for d(1/2 m_x U^2)/dt
-Y_C_RAM = 15       # the momentum of water drawn in at rest (rho Q_in U)
-Y_VALVE = 16       # actual valve opening 0..1 (rate limited, piecewise constant over a step)
+Y_E_VALVE = 9  # valve throttling loss plus the loss when the valve seals a moving flow
+Y_E_MIX = 10  # kinetic energy given to water drawn in (pump and nozzle inflow), then mixed
+# energy created by the applied equations beyond the energy-consistent ones (negative: destroyed),
+# J; each is int (applied - consistent generalised force) x its velocity dt
+Y_C_KX = 11  # the paper's k_x b: no reaction anywhere
+Y_C_JET = 12  # the Bernoulli pressure that the paper's shell does not pay for the jet
+Y_C_NOZZLE = 13  # the convective term 1/2 dm_l/db b'^2 of the b-dependent nozzle mass
+Y_C_AMV = 14  # the outer flow's pull R_x that pays for d(1/2 m_x U^2)/dt
+Y_C_RAM = 15  # the momentum of water drawn in at rest (rho Q_in U)
+Y_VALVE = 16  # actual valve opening 0..1 (rate limited, piecewise constant over a step)
 NY = 17
 N_INTEGRATED = 16  # components 0..15 go through Runge-Kutta
 
 # ---- parameter indices ------------------------------------------------------------------------
-P_RHO = 0          # water density, kg/m^3
-P_MU = 1           # water dynamic viscosity, Pa s
-P_A = 2            # major semi-axis a, m
-P_B0 = 3           # rest minor semi-axis b0, m
-P_K = 4            # lumped shell stiffness, N/m
-P_M_SOLID = 5      # shell + payload mass, kg
-P_I_B = 6          # shell wall inertia of the b mode, kg
-P_M_B = 7          # internal added mass of the b mode, kg
-P_L_N = 8          # nozzle length, m
-P_A_N = 9          # nozzle section, m^2
-P_D_N = 10         # nozzle diameter, m
-P_K_INLET = 11     # square-edged inlet loss coefficient
-P_CD = 12          # drag coefficient
-P_V_SOLID = 13     # volume inside the shell not filled by water, m^3
-P_C1 = 14          # coefficient of the simplified added mass
-P_PUMP_TAU = 15    # pump spin-up time constant, s
+P_RHO = 0  # water density, kg/m^3
+P_MU = 1  # water dynamic viscosity, Pa s
+P_A = 2  # major semi-axis a, m
+P_B0 = 3  # rest minor semi-axis b0, m
+P_K = 4  # lumped shell stiffness, N/m
+P_M_SOLID = 5  # shell + payload mass, kg
+P_I_B = 6  # shell wall inertia of the b mode, kg
+P_M_B = 7  # internal added mass of the b mode, kg
+P_L_N = 8  # nozzle length, m
+P_A_N = 9  # nozzle section, m^2
+P_D_N = 10  # nozzle diameter, m
+P_K_INLET = 11  # square-edged inlet loss coefficient
+P_CD = 12  # drag coefficient
+P_V_SOLID = 13  # volume inside the shell not filled by water, m^3
+P_C1 = 14  # coefficient of the simplified added mass
+P_PUMP_TAU = 15  # pump spin-up time constant, s
 P_VALVE_RATE = 16  # valve stroke rate, 1/s
-P_B_MIN = 17       # bounds of b that the model accepts, m
+P_B_MIN = 17  # bounds of b that the model accepts, m
 P_B_MAX = 18
-P_U_MAX = 19       # bound of |U|, m/s
-P_P_RELIEF = 20    # pump relief valve: full flow up to this shell pressure, Pa
-P_P_STALL = 21     # ... and none at this one (the pump's pressure-flow curve), Pa
+P_U_MAX = 19  # bound of |U|, m/s
+P_P_RELIEF = 20  # pump relief valve: full flow up to this shell pressure, Pa
+P_P_STALL = 21  # ... and none at this one (the pump's pressure-flow curve), Pa
 NP = 22
 
 # ---- diagnostic outputs of the right-hand side --------------------------------------------------
@@ -108,12 +114,12 @@ D_Q_N = 3
 D_P_CAV = 4
 D_ACCEL = 5
 D_M_X = 6
-D_K_X = 7          # the paper's fluid stiffness k_x (eq. 10), N/m, in both couplings
+D_K_X = 7  # the paper's fluid stiffness k_x (eq. 10), N/m, in both couplings
 D_M_L = 8
 D_VEHICLE_MASS = 9
 D_B_MASS = 10
 D_DAMPING_RATE = 11  # estimate of the fastest decay rate, 1/s (sets the sub-steps)
-D_SPRING_RATE = 12   # shell angular frequency sqrt(k_eff/m), rad/s
+D_SPRING_RATE = 12  # shell angular frequency sqrt(k_eff/m), rad/s
 ND = 13
 
 # status codes of advance()
@@ -124,7 +130,7 @@ ERR_B_HIGH = 3
 ERR_SPEED = 4
 ERR_SUBSTEPS = 5
 
-RK4_STABLE_REAL = 2.785   # RK4 stability limit on the negative real axis
+RK4_STABLE_REAL = 2.785  # RK4 stability limit on the negative real axis
 MAX_SUBSTEPS = 4096
 
 
@@ -135,7 +141,7 @@ def added_mass(flags, b, p):
     a = p[P_A]
     if flags & O_ADDED_MASS_SIMPLIFIED:
         c = p[P_C1] * rho * 4.0 / 3.0 * math.pi
-        return c * b ** 3, 3.0 * c * b ** 2
+        return c * b**3, 3.0 * c * b**2
     # Lamb's exact potential-flow coefficient k1 = alpha0 / (2 - alpha0)
     ratio = b / a
     e2 = 1.0 - ratio * ratio
@@ -152,10 +158,13 @@ def added_mass(flags, b, p):
 
 @njit(cache=True, nogil=True, inline='always')
 def fluid_stiffness_force(b, u, p):
-    """The paper's fluid stiffness (section 3.5, eqs. 9-10; eq. 10 lost): U_max/U = 1 + b/2a,
-    Cp = 1 - (U_max/U)^2, dCp = -2 Cp (the internal coefficient Cp' not given: 0), integral force
-    F = q 2 pi a b dCp with q = rho U^2 / 2, and dF = k_x db. Returns (F in N, k_x in N/m); the
-    paper coupling applies k_x b (eq. 3), the consistent one only reports k_x."""
+    """
+    Return the paper's fluid stiffness (section 3.5, eqs. 9-10; eq. 10 lost).
+
+    U_max/U = 1 + b/2a, Cp = 1 - (U_max/U)^2, dCp = -2 Cp (the internal coefficient Cp' not given:
+    0), integral force F = q 2 pi a b dCp with q = rho U^2 / 2, and dF = k_x db. Returns (F in N,
+    k_x in N/m); the paper coupling applies k_x b (eq. 3), the consistent one only reports k_x.
+    """
     a = p[P_A]
     q = 0.5 * p[P_RHO] * u * u
     s = 1.0 + b / (2.0 * a)
@@ -168,11 +177,13 @@ def fluid_stiffness_force(b, u, p):
 
 @njit(cache=True, nogil=True)
 def rhs(flags, y, valve, q_cmd, p, dy, diag):
-    """Time derivatives of y at fixed valve opening and pump command; fills diag.
+    """
+    Time derivatives of y at fixed valve opening and pump command; fills diag.
 
     Every force that the energy-consistent coupling applies is computed (its ``*_ref`` value); the
     coupling decides which are applied, and the ledger books the power of the difference as
-    created energy (``Y_C_*``)."""
+    created energy (``Y_C_*``).
+    """
     rho = p[P_RHO]
     a = p[P_A]
     u = y[Y_U]
@@ -180,17 +191,18 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     w = y[Y_W]
     q_p = y[Y_QP]
     c_a = 8.0 / 3.0 * math.pi * a
-    v_b = c_a * b                     # dV/db, m^2
+    v_b = c_a * b  # dV/db, m^2
     # the pump's pressure-flow curve (a positive-displacement pump with a relief valve): full flow
     # up to the relief pressure of the shell's elastic pressure k (b - b0) / V_b, none at the stall
-    # pressure, linear between; it keeps any command sequence from inflating the shell past its bound
+    # pressure, linear between; it keeps any command sequence from inflating the shell past its
+    # bound
     q_target = q_cmd
     if q_cmd > 0.0:
         p_el = p[P_K] * (b - p[P_B0]) / v_b
         if p_el > p[P_P_RELIEF]:
             q_target = q_cmd * max(0.0, (p[P_P_STALL] - p_el) / (p[P_P_STALL] - p[P_P_RELIEF]))
     dq_p = (q_target - q_p) / p[P_PUMP_TAU]
-    volume = c_a * b * b / 2.0        # 4/3 pi a b^2
+    volume = c_a * b * b / 2.0  # 4/3 pi a b^2
     a_n = p[P_A_N]
 
     # shell inertia of the b mode (the nozzle part depends on the flow and is added below)
@@ -252,12 +264,13 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
             lam = 32.0 * p[P_MU] * p[P_L_N] / (d_n * d_n)
             dp_visc = lam * u_n + sgn * 0.5 * rho * p[P_K_INLET] * u_n * u_n
             dpdq += (lam + rho * p[P_K_INLET] * abs(u_n)) / a_n
-        # valve as an orifice at the nozzle inlet: Borda-Carnot loss of the contraction to valve*A_n
+        # valve as an orifice at the nozzle inlet: Borda-Carnot loss of the contraction to
+        # valve*A_n
         contraction = 1.0 / valve - 1.0
         dp_valve = sgn * 0.5 * rho * contraction * contraction * u_n * u_n
         dpdq += rho * contraction * contraction * abs(u_n) / a_n
-        # Bernoulli pressure that accelerates the jet, and the convective part of the nozzle inertia
-        # (m_l = Lambda V_b^2 depends on b: 1/2 dm_l/db b'^2 = Lambda V_b c_a b'^2)
+        # Bernoulli pressure that accelerates the jet, and the convective part of the nozzle
+        # inertia (m_l = Lambda V_b^2 depends on b: 1/2 dm_l/db b'^2 = Lambda V_b c_a b'^2)
         dp_jet_ref = sgn * 0.5 * rho * u_n * u_n
         dp_jet = 0.0
         convective = 0.0
@@ -270,11 +283,16 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
             c_nozzle = inertance * v_b * c_a * w * w * w
         dp_n = dp_visc + dp_valve + dp_jet
         m_b_total = m_shell + m_l
-        force = (-p[P_K] * (b - p[P_B0]) - f_kx + reaction + v_b * dp_n
-                 + inertance * v_b * (dq_p - convective))
+        force = (
+            -p[P_K] * (b - p[P_B0])
+            - f_kx
+            + reaction
+            + v_b * dp_n
+            + inertance * v_b * (dq_p - convective)
+        )
         dw = force / m_b_total
-        # cavity pressure at the nozzle inlet: what the nozzle flow needs (drop + acceleration); the
-        # same definition in both couplings, so the pump's work is the same physical quantity
+        # cavity pressure at the nozzle inlet: what the nozzle flow needs (drop + acceleration);
+        # the same definition in both couplings, so the pump's work is the same physical quantity
         dq_n = dq_p - c_a * w * w - v_b * dw
         p_cav = dp_visc + dp_valve + dp_jet_ref + inertance * dq_n
         damping_rate = v_b * v_b * dpdq / m_b_total
@@ -319,7 +337,7 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     dy[Y_W_PUMP] = p_cav * q_p
     if q_n > 0.0:
         u_j = q_n / a_n
-        dy[Y_E_JET] = 0.5 * rho * q_n * (u_j - u) ** 2       # earth frame
+        dy[Y_E_JET] = 0.5 * rho * q_n * (u_j - u) ** 2  # earth frame
         dy[Y_E_MIX] = 0.5 * rho * q_in * u * u
     else:
         # inflow through the nozzle: its jet into the cavity and its speed-up to U are mixed away
@@ -352,7 +370,11 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
 
 @njit(cache=True, nogil=True)
 def _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag):
-    """One classical RK4 step of size h; k1 must already hold rhs at y (the caller evaluated it)."""
+    """
+    Take one classical RK4 step of size h.
+
+    k1 must already hold rhs at y (the caller evaluated it).
+    """
     n = N_INTEGRATED
     for i in range(n):
         tmp[i] = y[i] + 0.5 * h * k1[i]
@@ -411,8 +433,11 @@ def stored_energy(flags, y, p):
 
 @njit(cache=True, nogil=True)
 def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
-    """Advance y by n_steps fixed steps of dt. Returns (steps done, status); on a bad state y is
-    restored to the last good step."""
+    """
+    Advance y by n_steps fixed steps of dt.
+
+    Returns (steps done, status); on a bad state y is restored to the last good step.
+    """
     k1 = np.empty(NY)
     k2 = np.empty(NY)
     k3 = np.empty(NY)
@@ -435,7 +460,7 @@ def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
                 return step, ERR_SUBSTEPS
         h = dt / n_sub
         for sub in range(n_sub):
-            if sub > 0:   # the first k1 is the evaluation that sized the sub-steps
+            if sub > 0:  # the first k1 is the evaluation that sized the sub-steps
                 rhs(flags, y, valve, q_cmd, p, k1, diag)
             _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag)
         # the valve moves at its stroke rate between steps
@@ -453,7 +478,7 @@ def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
                 y[Y_VALVE] = 0.0
                 y[Y_W] = y[Y_QP] / (8.0 / 3.0 * math.pi * p[P_A] * y[Y_B])
                 e_after = stored_energy(flags, y, p)
-                y[Y_E_VALVE] += (e_before[3] - e_after[3])
+                y[Y_E_VALVE] += e_before[3] - e_after[3]
             else:
                 y[Y_VALVE] = new_valve
         status = _check(y, p)
@@ -488,7 +513,8 @@ _SPECIALISED: dict = {}
 
 
 def specialised(dispatcher, flags: int, *args):
-    """The compiled entry point of `dispatcher` for this literal flag value.
+    """
+    Return the compiled entry point of `dispatcher` for this literal flag value.
 
     ``numba.literally`` re-dispatches through Python on every call (milliseconds); the entry point
     of the specialisation skips that, so a batch of a few physics steps stays cheap. The first call
@@ -502,48 +528,71 @@ def specialised(dispatcher, flags: int, *args):
             if getattr(sig[0], 'literal_value', None) == flags:
                 fn = cres.entry_point
                 break
-        else:   # pragma: no cover - numba changed how it stores literal specialisations
+        else:  # pragma: no cover - numba changed how it stores literal specialisations
             fn = dispatcher
         _SPECIALISED[key] = fn
     return fn
 
 
-# ==== adaptive, error-controlled integrator ========================================================
+# ==== adaptive, error-controlled integrator ======================================================
 # Dormand-Prince 5(4) (Hairer, Norsett & Wanner, Solving ODEs I, II.5; the pair of DOPRI5 and
-# scipy's RK45): 7 stages, first-same-as-last, local extrapolation (the 5th-order solution is kept),
-# PI step-size control (Hairer & Wanner's DOPRI5 constants, beta = 0.04), and cubic Hermite dense
-# output from the end-point values and slopes (3rd order, exact at the step's ends) for outputs at
-# the publication rate. Piecewise-smooth inputs are handled by integrating segments on which they
-# are smooth: the caller's command is constant over a call and the valve moves linearly at its
-# stroke rate until it reaches the command (a kink), so the integration stops exactly at the kink and
-# the step-size controller restarts there and at every command change. When the valve reaches 0 the
-# cavity seals with the same jump (and the same valve-loss booking) as the fixed-step path.
-# The fixed-step RK4 path above is untouched.
+# scipy's RK45): 7 stages, first-same-as-last, local extrapolation (the 5th-order solution is
+# kept), PI step-size control (Hairer & Wanner's DOPRI5 constants, beta = 0.04), and cubic Hermite
+# dense output from the end-point values and slopes (3rd order, exact at the step's ends) for
+# outputs at the publication rate. Piecewise-smooth inputs are handled by integrating segments on
+# which they are smooth: the caller's command is constant over a call and the valve moves linearly
+# at its stroke rate until it reaches the command (a kink), so the integration stops exactly at the
+# kink and the step-size controller restarts there and at every command change. When the valve
+# reaches 0 the cavity seals with the same jump (and the same valve-loss booking) as the fixed-step
+# path. The fixed-step RK4 path above is untouched.
 DP_C2, DP_C3, DP_C4, DP_C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
 DP_A21 = 1.0 / 5.0
 DP_A31, DP_A32 = 3.0 / 40.0, 9.0 / 40.0
 DP_A41, DP_A42, DP_A43 = 44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0
-DP_A51, DP_A52, DP_A53, DP_A54 = 19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0
-DP_A61, DP_A62, DP_A63, DP_A64, DP_A65 = (9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0,
-                                          -5103.0 / 18656.0)
-DP_B1, DP_B3, DP_B4, DP_B5, DP_B6 = 35.0 / 384.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0
+DP_A51, DP_A52, DP_A53, DP_A54 = (
+    19372.0 / 6561.0,
+    -25360.0 / 2187.0,
+    64448.0 / 6561.0,
+    -212.0 / 729.0,
+)
+DP_A61, DP_A62, DP_A63, DP_A64, DP_A65 = (
+    9017.0 / 3168.0,
+    -355.0 / 33.0,
+    46732.0 / 5247.0,
+    49.0 / 176.0,
+    -5103.0 / 18656.0,
+)
+DP_B1, DP_B3, DP_B4, DP_B5, DP_B6 = (
+    35.0 / 384.0,
+    500.0 / 1113.0,
+    125.0 / 192.0,
+    -2187.0 / 6784.0,
+    11.0 / 84.0,
+)
 # error coefficients: 5th-order minus 4th-order weights
-DP_E1, DP_E3, DP_E4, DP_E5, DP_E6, DP_E7 = (71.0 / 57600.0, -71.0 / 16695.0, 71.0 / 1920.0,
-                                            -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0)
+DP_E1, DP_E3, DP_E4, DP_E5, DP_E6, DP_E7 = (
+    71.0 / 57600.0,
+    -71.0 / 16695.0,
+    71.0 / 1920.0,
+    -17253.0 / 339200.0,
+    22.0 / 525.0,
+    -1.0 / 40.0,
+)
 ADAPT_SAFETY = 0.9
 ADAPT_FAC_MIN = 0.2
 ADAPT_FAC_MAX = 10.0
-ADAPT_BETA = 0.04               # PI part of the controller (0: classical I controller)
-ADAPT_MAX_STEPS = 10_000_000    # per call; beyond: ERR_SUBSTEPS
-ADAPT_H_MIN = 1e-12             # s; a step below it is a fault (stiffness out of range)
+ADAPT_BETA = 0.04  # PI part of the controller (0: classical I controller)
+ADAPT_MAX_STEPS = 10_000_000  # per call; beyond: ERR_SUBSTEPS
+ADAPT_H_MIN = 1e-12  # s; a step below it is a fault (stiffness out of range)
 # A valve closing on a moving flow is stiff like 1/opening near the end of its stroke, so the steps
-# shrink geometrically towards the instant it seals; the cavity is sealed this long before it (at an
-# opening of SEAL_SNAP_S x stroke rate, 2e-6 for a 50 ms stroke; the fixed step seals from dt x rate)
+# shrink geometrically towards the instant it seals; the cavity is sealed this long before it (at
+# an opening of SEAL_SNAP_S x stroke rate, 2e-6 for a 50 ms stroke; the fixed step seals from dt x
+# rate)
 SEAL_SNAP_S = 1e-7
 # step-memory slots appended to the state vector of an adaptive run (after the NY physical ones)
-M_H = 0            # next step size, s (0: restart the controller)
-M_ERR = 1          # previous accepted error norm (PI controller)
-M_Q = 2            # command of the previous call: a change restarts the controller
+M_H = 0  # next step size, s (0: restart the controller)
+M_ERR = 1  # previous accepted error norm (PI controller)
+M_Q = 2  # command of the previous call: a change restarts the controller
 M_VALVE = 3
 NMEM = 4
 
@@ -551,19 +600,22 @@ NMEM = 4
 S_ACCEPTED = 0
 S_REJECTED = 1
 S_RHS = 2
-S_T_DONE = 3       # time reached (s, from the call's start); < duration only on a fault
+S_T_DONE = 3  # time reached (s, from the call's start); < duration only on a fault
 NSTATS = 4
 
 
 @njit(cache=True, nogil=True)
 def _seal(flags, y, p):
-    """The valve seals a moving flow: the water in the nozzle stops and the shell follows the pump;
-    the kinetic energy this removes is booked as valve loss (as in the fixed-step path)."""
+    """
+    Seal a moving flow at the valve: the water in the nozzle stops, the shell follows the pump.
+
+    The kinetic energy this removes is booked as valve loss (as in the fixed-step path).
+    """
     e_before = stored_energy(flags, y, p)
     y[Y_VALVE] = 0.0
     y[Y_W] = y[Y_QP] / (8.0 / 3.0 * math.pi * p[P_A] * y[Y_B])
     e_after = stored_energy(flags, y, p)
-    y[Y_E_VALVE] += (e_before[3] - e_after[3])
+    y[Y_E_VALVE] += e_before[3] - e_after[3]
 
 
 @njit(cache=True, nogil=True)
@@ -579,7 +631,11 @@ def _err_norm(y0, y1, e, h, rtol, atol):
 
 @njit(cache=True, nogil=True)
 def _initial_step(flags, y, f0, valve, q_cmd, p, rtol, atol, span, tmp, f1, diag):
-    """Hairer, Norsett & Wanner's starting step (II.4): h0 from |y|/|f|, refined by one Euler probe."""
+    """
+    Return Hairer, Norsett & Wanner's starting step (II.4).
+
+    h0 from |y|/|f|, refined by one Euler probe.
+    """
     d0 = 0.0
     d1 = 0.0
     for i in range(N_INTEGRATED):
@@ -612,12 +668,35 @@ def _valve_at(v0, v_rate, dt):
 
 
 @njit(cache=True, nogil=True)
-def _segment(flags, y, p, q_cmd, v0, v_rate, t0, t1, snap, rtol, atol, mem, t_out, out, n_out_done, stats, ks,
-             tmp, y_old, diag):
-    """Integrate y from t0 to t1 with the valve at v0 + v_rate (t - t0) (a smooth segment); outputs
-    at the times t_out[j] in (t0, t1] by Hermite interpolation. The segment ends early once less than
-    `snap` seconds are left (a valve closing to 0: see SEAL_SNAP_S). Returns (status, outputs written,
-    time reached)."""
+def _segment(
+    flags,
+    y,
+    p,
+    q_cmd,
+    v0,
+    v_rate,
+    t0,
+    t1,
+    snap,
+    rtol,
+    atol,
+    mem,
+    t_out,
+    out,
+    n_out_done,
+    stats,
+    ks,
+    tmp,
+    y_old,
+    diag,
+):
+    """
+    Integrate y from t0 to t1 with the valve at v0 + v_rate (t - t0) (a smooth segment).
+
+    Outputs at the times t_out[j] in (t0, t1] by Hermite interpolation. The segment ends early once
+    less than `snap` seconds are left (a valve closing to 0: see SEAL_SNAP_S). Returns (status,
+    outputs written, time reached).
+    """
     k1 = ks[0]
     k2 = ks[1]
     k3 = ks[2]
@@ -642,7 +721,7 @@ def _segment(flags, y, p, q_cmd, v0, v_rate, t0, t1, snap, rtol, atol, mem, t_ou
     steps = 0
     while t < t1 - snap:
         last = False
-        if t + h >= t1 - (1e-9 + 1e-15 * abs(t1)):   # no sliver steps before a kink
+        if t + h >= t1 - (1e-9 + 1e-15 * abs(t1)):  # no sliver steps before a kink
             h_step = t1 - t
             last = True
         else:
@@ -658,21 +737,31 @@ def _segment(flags, y, p, q_cmd, v0, v_rate, t0, t1, snap, rtol, atol, mem, t_ou
             tmp[i] = y[i] + h_step * (DP_A41 * k1[i] + DP_A42 * k2[i] + DP_A43 * k3[i])
         rhs(flags, tmp, _valve_at(v0, v_rate, t + DP_C4 * h_step - t0), q_cmd, p, k4, diag)
         for i in range(N_INTEGRATED):
-            tmp[i] = y[i] + h_step * (DP_A51 * k1[i] + DP_A52 * k2[i] + DP_A53 * k3[i] + DP_A54 * k4[i])
+            tmp[i] = y[i] + h_step * (
+                DP_A51 * k1[i] + DP_A52 * k2[i] + DP_A53 * k3[i] + DP_A54 * k4[i]
+            )
         rhs(flags, tmp, _valve_at(v0, v_rate, t + DP_C5 * h_step - t0), q_cmd, p, k5, diag)
         for i in range(N_INTEGRATED):
-            tmp[i] = y[i] + h_step * (DP_A61 * k1[i] + DP_A62 * k2[i] + DP_A63 * k3[i] + DP_A64 * k4[i]
-                                      + DP_A65 * k5[i])
+            tmp[i] = y[i] + h_step * (
+                DP_A61 * k1[i] + DP_A62 * k2[i] + DP_A63 * k3[i] + DP_A64 * k4[i] + DP_A65 * k5[i]
+            )
         v_end = _valve_at(v0, v_rate, t + h_step - t0)
         rhs(flags, tmp, v_end, q_cmd, p, k6, diag)
         for i in range(N_INTEGRATED):
-            tmp[i] = y[i] + h_step * (DP_B1 * k1[i] + DP_B3 * k3[i] + DP_B4 * k4[i] + DP_B5 * k5[i]
-                                      + DP_B6 * k6[i])
+            tmp[i] = y[i] + h_step * (
+                DP_B1 * k1[i] + DP_B3 * k3[i] + DP_B4 * k4[i] + DP_B5 * k5[i] + DP_B6 * k6[i]
+            )
         rhs(flags, tmp, v_end, q_cmd, p, k7, diag)
         stats[S_RHS] += 6
         for i in range(N_INTEGRATED):
-            e[i] = (DP_E1 * k1[i] + DP_E3 * k3[i] + DP_E4 * k4[i] + DP_E5 * k5[i] + DP_E6 * k6[i]
-                    + DP_E7 * k7[i])
+            e[i] = (
+                DP_E1 * k1[i]
+                + DP_E3 * k3[i]
+                + DP_E4 * k4[i]
+                + DP_E5 * k5[i]
+                + DP_E6 * k6[i]
+                + DP_E7 * k7[i]
+            )
         err = _err_norm(y, tmp, e, h_step, rtol, atol)
         if not math.isfinite(err):
             err = 1e10
@@ -687,7 +776,9 @@ def _segment(flags, y, p, q_cmd, v0, v_rate, t0, t1, snap, rtol, atol, mem, t_ou
                 h01 = s * s * (3.0 - 2.0 * s)
                 h11 = s * s * (s - 1.0)
                 for i in range(N_INTEGRATED):
-                    out[j, i] = (h00 * y[i] + h10 * h_step * k1[i] + h01 * tmp[i] + h11 * h_step * k7[i])
+                    out[j, i] = (
+                        h00 * y[i] + h10 * h_step * k1[i] + h01 * tmp[i] + h11 * h_step * k7[i]
+                    )
                 out[j, Y_VALVE] = _valve_at(v0, v_rate, t_out[j] - t0)
                 j += 1
             for i in range(NY):
@@ -711,11 +802,12 @@ def _segment(flags, y, p, q_cmd, v0, v_rate, t0, t1, snap, rtol, atol, mem, t_ou
             if not last:
                 h = h_step * fac
             else:
-                # keep the step the controller wants for the next call (clipping at t1 is not a verdict)
+                # keep the step the controller wants for the next call (clipping at t1 is not a
+                # verdict)
                 h = max(h, h_step * fac)
         else:
             stats[S_REJECTED] += 1
-            fac = max(ADAPT_FAC_MIN, ADAPT_SAFETY * err ** -0.2)
+            fac = max(ADAPT_FAC_MIN, ADAPT_SAFETY * err**-0.2)
             h = h_step * min(fac, 1.0)
         if h < ADAPT_H_MIN and t < t1 - snap:
             stats[S_T_DONE] = t
@@ -731,10 +823,13 @@ def _segment(flags, y, p, q_cmd, v0, v_rate, t0, t1, snap, rtol, atol, mem, t_ou
 
 @njit(cache=True, nogil=True)
 def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats):
-    """Advance y (NY components) by `duration` seconds holding the command, adaptively; mem (NMEM)
-    carries the controller between calls. Writes the state at each t_out[j] in (0, duration]
-    (increasing) to out[j]. Returns (status, outputs written); stats: see S_*. On a fault y is the
-    last accepted state and stats[S_T_DONE] its time."""
+    """
+    Advance y (NY components) by `duration` seconds holding the command, adaptively.
+
+    mem (NMEM) carries the controller between calls. Writes the state at each t_out[j] in (0,
+    duration] (increasing) to out[j]. Returns (status, outputs written); stats: see S_*. On a fault
+    y is the last accepted state and stats[S_T_DONE] its time.
+    """
     ks = np.empty((8, NY))
     tmp = np.empty(NY)
     y_old = np.empty(NY)
@@ -742,7 +837,7 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
     for i in range(NSTATS):
         stats[i] = 0.0
     if q_cmd != mem[M_Q] or valve_cmd != mem[M_VALVE]:
-        mem[M_H] = 0.0          # a command change: the inputs jump, restart the controller
+        mem[M_H] = 0.0  # a command change: the inputs jump, restart the controller
         mem[M_Q] = q_cmd
         mem[M_VALVE] = valve_cmd
     n_written = 0
@@ -751,20 +846,40 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
     v0 = y[Y_VALVE]
     t = 0.0
     if valve_cmd != v0 and abs(valve_cmd - v0) <= 1e-12 and not (valve_cmd <= 0.0 < v0):
-        y[Y_VALVE] = valve_cmd      # a round-off remainder of a ramp: no sliver segment
+        y[Y_VALVE] = valve_cmd  # a round-off remainder of a ramp: no sliver segment
         v0 = valve_cmd
     if valve_cmd != v0:
         rate = p[P_VALVE_RATE]
         t_ramp = abs(valve_cmd - v0) / rate
         if abs(t_ramp - duration) <= 1e-12 * duration:
-            t_ramp = duration       # the ramp ends with the call (round-off of the stroke arithmetic)
+            t_ramp = duration  # the ramp ends with the call (round-off of the stroke arithmetic)
         v_rate = rate if valve_cmd > v0 else -rate
         t_end = min(t_ramp, duration)
         snap = 0.0
         if valve_cmd <= 0.0 and t_ramp <= duration:
             snap = SEAL_SNAP_S
-        status, n_written, t = _segment(flags, y, p, q_cmd, v0, v_rate, 0.0, t_end, snap, rtol, atol, mem, t_out,
-                                        out, n_written, stats, ks, tmp, y_old, diag)
+        status, n_written, t = _segment(
+            flags,
+            y,
+            p,
+            q_cmd,
+            v0,
+            v_rate,
+            0.0,
+            t_end,
+            snap,
+            rtol,
+            atol,
+            mem,
+            t_out,
+            out,
+            n_written,
+            stats,
+            ks,
+            tmp,
+            y_old,
+            diag,
+        )
         if status != OK:
             return status, n_written
         if t_ramp <= duration:
@@ -779,8 +894,28 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
                 stats[S_T_DONE] = t
                 return status, n_written
     if t < duration:
-        status, n_written, t = _segment(flags, y, p, q_cmd, y[Y_VALVE], 0.0, t, duration, 0.0, rtol, atol, mem,
-                                        t_out, out, n_written, stats, ks, tmp, y_old, diag)
+        status, n_written, t = _segment(
+            flags,
+            y,
+            p,
+            q_cmd,
+            y[Y_VALVE],
+            0.0,
+            t,
+            duration,
+            0.0,
+            rtol,
+            atol,
+            mem,
+            t_out,
+            out,
+            n_written,
+            stats,
+            ks,
+            tmp,
+            y_old,
+            diag,
+        )
         if status != OK:
             return status, n_written
     stats[S_T_DONE] = duration
@@ -790,5 +925,6 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
 @njit(cache=True, nogil=True)
 def adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats):
     """Entry point: specialise on the term set (see module docstring)."""
-    return _adaptive_advance(literally(flags), y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out,
-                             stats)
+    return _adaptive_advance(
+        literally(flags), y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats
+    )

@@ -1,4 +1,5 @@
-"""Reference meridian profiles of the axisymmetric mantle (paper 000), sampled at N+1 nodes.
+"""
+Reference meridian profiles of the axisymmetric mantle (paper 000), sampled at N+1 nodes.
 
 Conventions (shared with shell_kernels.py)
 -----------------------------------------
@@ -16,14 +17,14 @@ length; the nodal tangent angle comes from the dense polyline.  Kinks (cap/cylin
 cone apex) are therefore allowed: the kernels take the discrete reference configuration as the
 stress-free state, whatever its curvature.
 """
+
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 from typing import Any, Mapping
 
 import numpy as np
-
 from pulsejet_sim.models.base import ModelError
 
 GEOMETRY_KINDS = ('ellipsoid', 'cone', 'cap_cylinder', 'points')
@@ -34,9 +35,9 @@ _DENSE = 4001
 class Profile:
     """Reference meridian at the nodes (arrays of length N+1)."""
 
-    X: np.ndarray       # reference arc length from the pole, m
-    r0: np.ndarray      # reference radius, m (r0[0] == 0)
-    z0: np.ndarray      # reference axial position, m (z0[-1] == 0, the ring)
+    X: np.ndarray  # reference arc length from the pole, m
+    r0: np.ndarray  # reference radius, m (r0[0] == 0)
+    z0: np.ndarray  # reference axial position, m (z0[-1] == 0, the ring)
     theta0: np.ndarray  # tangent angle, rad
 
     @property
@@ -49,10 +50,14 @@ class Profile:
 
     def volume_m3(self) -> float:
         r, z = self.r0, self.z0
-        return float(np.sum(math.pi / 3.0 * (r[:-1] ** 2 + r[:-1] * r[1:] + r[1:] ** 2) * (z[:-1] - z[1:])))
+        return float(
+            np.sum(math.pi / 3.0 * (r[:-1] ** 2 + r[:-1] * r[1:] + r[1:] ** 2) * (z[:-1] - z[1:]))
+        )
 
 
-def _num(section: Mapping[str, Any], key: str, where: str, low: float, high: float, default=None) -> float:
+def _num(
+    section: Mapping[str, Any], key: str, where: str, low: float, high: float, default=None
+) -> float:
     if key not in section:
         if default is None:
             raise ModelError(f'{where}.{key}: missing; allowed: a number in [{low}, {high}]')
@@ -61,14 +66,19 @@ def _num(section: Mapping[str, Any], key: str, where: str, low: float, high: flo
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ModelError(f'{where}.{key}: {value!r} is not a number; allowed: a number in [{low}, {high}]') from None
+        raise ModelError(
+            f'{where}.{key}: {value!r} is not a number; allowed: a number in [{low}, {high}]'
+        ) from None
     if not math.isfinite(v) or v < low or v > high:
-        raise ModelError(f'{where}.{key}: {value!r} is out of range; allowed: a number in [{low}, {high}]')
+        raise ModelError(
+            f'{where}.{key}: {value!r} is out of range; allowed: a number in [{low}, {high}]'
+        )
     return v
 
 
 def _ellipsoid(g):
-    """Prolate/oblate ellipsoid of revolution, truncated at the back where r = opening radius.
+    """
+    Prolate/oblate ellipsoid of revolution, truncated at the back where r = opening radius.
 
     ``r = b sin(phi)``, ``z = a cos(phi)`` with ``phi = 0`` at the front pole; the ring is on the
     rear half (``phi > pi/2``) where ``b sin(phi) = opening_radius_m``.
@@ -77,15 +87,18 @@ def _ellipsoid(g):
     b = _num(g, 'semi_axis_radial_m', 'geometry', 1e-3, 10.0)
     ro = _num(g, 'opening_radius_m', 'geometry', 1e-4, 10.0)
     if ro >= b:
-        raise ModelError(f'geometry.opening_radius_m: {ro!r} m is not below semi_axis_radial_m={b} m; '
-                         f'allowed: 0 < opening_radius_m < semi_axis_radial_m')
+        raise ModelError(
+            f'geometry.opening_radius_m: {ro!r} m is not below semi_axis_radial_m={b} m; '
+            f'allowed: 0 < opening_radius_m < semi_axis_radial_m'
+        )
     phi_e = math.pi - math.asin(ro / b)
     phi = np.linspace(0.0, phi_e, _DENSE)
     return b * np.sin(phi), a * np.cos(phi)
 
 
 def _cone(g):
-    """Cone from a rounded apex (front pole) widening to the ring at the back.
+    """
+    Cone from a rounded apex (front pole) widening to the ring at the back.
 
     The apex is rounded by a spherical cap of radius ``tip_radius_m`` tangent to the cone (so the
     pole director is radial, theta = 0); ``tip_radius_m = 0`` keeps a sharp apex.
@@ -93,18 +106,20 @@ def _cone(g):
     L = _num(g, 'length_m', 'geometry', 1e-3, 10.0)
     R = _num(g, 'base_radius_m', 'geometry', 1e-3, 10.0)
     rt = _num(g, 'tip_radius_m', 'geometry', 0.0, 10.0, default=0.2 * R)
-    beta = math.atan2(R, L)          # half-opening angle
+    beta = math.atan2(R, L)  # half-opening angle
     # tangent point of the tip sphere: the sphere centre on the axis at distance d from the apex
     # with d sin(beta) = rt; the cap spans polar angle 0 .. pi/2 - beta
     psi = math.pi / 2 - beta
     d = rt / math.sin(beta) if rt > 0 else 0.0
     if d >= L * 0.9:
-        raise ModelError(f'geometry.tip_radius_m: {rt!r} m rounds off most of the cone; '
-                         f'allowed: tip_radius_m < {0.9 * L * math.sin(beta):.4g} m')
+        raise ModelError(
+            f'geometry.tip_radius_m: {rt!r} m rounds off most of the cone; '
+            f'allowed: tip_radius_m < {0.9 * L * math.sin(beta):.4g} m'
+        )
     pts_r, pts_z = [], []
     if rt > 0:
         t = np.linspace(0.0, psi, _DENSE // 4)
-        zc = L - d                    # sphere centre (apex at z = L)
+        zc = L - d  # sphere centre (apex at z = L)
         pts_r.append(rt * np.sin(t))
         pts_z.append(zc + rt * np.cos(t))
         r_start, z_start = rt * math.sin(psi), zc + rt * math.cos(psi)
@@ -117,8 +132,11 @@ def _cone(g):
 
 
 def _cap_cylinder(g):
-    """The authors' robot mantle: spherical cap at the front, opened to ``cap_opening_rad``, then a
-    cylinder of radius ``cap_radius_m * sin(cap_opening_rad)`` back to the ring.
+    """
+    Return the authors' robot mantle: a spherical cap at the front, then a cylinder.
+
+    The cap is opened to ``cap_opening_rad``, then a cylinder of radius ``cap_radius_m *
+    sin(cap_opening_rad)`` runs back to the ring.
 
     Reading of "cap radius 31 mm opened at pi/4, continued by a cylinder": the cap spans polar
     angles 0..pi/4 of a 31 mm sphere (so the cylinder radius is 21.9 mm, with a kink of pi/4 at
@@ -138,7 +156,8 @@ def _cap_cylinder(g):
 
 
 def _points(g):
-    """Arbitrary profile: ``points: [[r, z], ...]`` from the pole (r = 0) to the ring.
+    """
+    Arbitrary profile: ``points: [[r, z], ...]`` from the pole (r = 0) to the ring.
 
     The polyline is refined linearly; z is shifted so that the ring sits at z = 0.
     """
@@ -146,14 +165,25 @@ def _points(g):
     try:
         arr = np.asarray(pts, dtype=float)
     except (TypeError, ValueError):
-        raise ModelError(f'geometry.points: {pts!r} is not a list of [r, z] pairs; allowed: >= 3 pairs of numbers') from None
+        raise ModelError(
+            f'geometry.points: {pts!r} is not a list of [r, z] pairs; allowed: >= 3 pairs of '
+            'numbers'
+        ) from None
     if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 3 or not np.all(np.isfinite(arr)):
-        raise ModelError(f'geometry.points: shape {arr.shape} rejected; allowed: >= 3 finite [r, z] pairs')
+        raise ModelError(
+            f'geometry.points: shape {arr.shape} rejected; allowed: >= 3 finite [r, z] pairs'
+        )
     if abs(arr[0, 0]) > 1e-12:
-        raise ModelError(f'geometry.points: first point r={arr[0, 0]!r} is not on the axis; allowed: first point '
-                         f'r = 0 (the pole)')
+        raise ModelError(
+            f'geometry.points: first point r={arr[0, 0]!r} is not on the axis; allowed: first '
+            'point '
+            f'r = 0 (the pole)'
+        )
     if np.any(arr[1:, 0] <= 0):
-        raise ModelError('geometry.points: a point after the pole has r <= 0; allowed: r > 0 after the first point')
+        raise ModelError(
+            'geometry.points: a point after the pole has r <= 0; allowed: r > 0 after the first '
+            'point'
+        )
     seg = np.hypot(np.diff(arr[:, 0]), np.diff(arr[:, 1]))
     if np.any(seg <= 0):
         raise ModelError('geometry.points: repeated point; allowed: distinct consecutive points')
@@ -162,17 +192,26 @@ def _points(g):
     return np.interp(sd, s, arr[:, 0]), np.interp(sd, s, arr[:, 1])
 
 
-_BUILDERS = {'ellipsoid': _ellipsoid, 'cone': _cone, 'cap_cylinder': _cap_cylinder, 'points': _points}
+_BUILDERS = {
+    'ellipsoid': _ellipsoid,
+    'cone': _cone,
+    'cap_cylinder': _cap_cylinder,
+    'points': _points,
+}
 
 
 def build_profile(geometry: Mapping[str, Any], n_elements: int) -> Profile:
     """Sample the geometry of a scene at ``n_elements + 1`` nodes equally spaced in arc length."""
     if not isinstance(geometry, Mapping):
-        raise ModelError(f'geometry: {geometry!r} is not a mapping; allowed: a mapping with kind: one of '
-                         f'{", ".join(GEOMETRY_KINDS)}')
+        raise ModelError(
+            f'geometry: {geometry!r} is not a mapping; allowed: a mapping with kind: one of '
+            f'{", ".join(GEOMETRY_KINDS)}'
+        )
     kind = geometry.get('kind')
     if kind not in _BUILDERS:
-        raise ModelError(f'geometry.kind: {kind!r} is not known; allowed: one of {", ".join(GEOMETRY_KINDS)}')
+        raise ModelError(
+            f'geometry.kind: {kind!r} is not known; allowed: one of {", ".join(GEOMETRY_KINDS)}'
+        )
     r, z = _BUILDERS[kind](geometry)
     z = z - z[-1]
     seg = np.hypot(np.diff(r), np.diff(z))
@@ -188,11 +227,15 @@ def build_profile(geometry: Mapping[str, Any], n_elements: int) -> Profile:
     # tangent angle at the arc-length positions of the nodes; at the two ends the segment-midpoint
     # values are extrapolated linearly (2nd order), so a smooth pole gets theta0 = 0 to O(ds^2)
     sm = np.concatenate([[0.0], smid, [s[-1]]])
-    am = np.concatenate([[ang[0] - 0.5 * (ang[1] - ang[0])], ang, [ang[-1] + 0.5 * (ang[-1] - ang[-2])]])
+    am = np.concatenate(
+        [[ang[0] - 0.5 * (ang[1] - ang[0])], ang, [ang[-1] + 0.5 * (ang[-1] - ang[-2])]]
+    )
     th = np.interp(X, sm, am)
     rn[0] = 0.0
     zn[-1] = 0.0
     if np.any(rn[1:] <= 0):
-        raise ModelError(f'geometry: the {kind} profile touches the axis away from the pole; allowed: r > 0 '
-                         f'after the pole')
+        raise ModelError(
+            f'geometry: the {kind} profile touches the axis away from the pole; allowed: r > 0 '
+            f'after the pole'
+        )
     return Profile(X=X, r0=rn, z0=zn, theta0=th)
