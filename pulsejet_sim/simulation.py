@@ -10,6 +10,8 @@ class Simulation:
 
     def __init__(self, model, command: Command | None = None):
         self.model = model
+        # the model's actuator ranges (e.g. a shell robot's cable rating) within Command.LIMITS
+        self.command_limits = dict(getattr(model, 'command_limits', None) or Command.LIMITS)
         self.default_command = command or getattr(model, 'initial_command', Command())
         self.reset()
 
@@ -42,7 +44,7 @@ class Simulation:
         if command is not None and command is not self.command:
             # checked once per new command (CommandError names the bad value): a NaN or an
             # out-of-range value never reaches the physics, whoever calls
-            self.command = command.validate()
+            self.command = command.validate(self.command_limits)
         if n_steps > 0:
             try:
                 done = self.model.advance(self.state, self.time_s, n_steps, self.command)

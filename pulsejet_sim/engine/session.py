@@ -457,7 +457,7 @@ class Session:
                         f'{source}: {name!r} is not a command field; allowed: '
                         f'{", ".join(Command.LIMITS)}'
                     )
-                low, high = Command.LIMITS[name]
+                low, high = self.sim.command_limits[name]
                 checked[name] = check_command_value(name, value, low, high)
         except CommandError:
             self.command_counts['rejected'] += 1

@@ -50,16 +50,18 @@ class Command:
         'cable_force_n': (0.0, 1000.0),
     }
 
-    def validate(self) -> 'Command':
+    def validate(self, limits: dict | None = None) -> 'Command':
         """
         Return this command with every value a float in its range (self when it already is one).
 
         Otherwise CommandError naming the first bad value and the allowed range (NaN, inf, text,
-        booleans, None and out-of-range values are refused).
+        booleans, None and out-of-range values are refused). ``limits``: the ranges of a model's
+        actuators (``Simulation.command_limits``), by default ``LIMITS``.
         """
+        limits = limits or self.LIMITS
         values = {}
         for f in fields(self):
-            low, high = self.LIMITS[f.name]
+            low, high = limits[f.name]
             values[f.name] = check_command_value(f.name, getattr(self, f.name), low, high)
         if all(type(getattr(self, k)) is float for k in values):
             return self
