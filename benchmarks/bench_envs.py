@@ -1,10 +1,12 @@
-"""Benchmark (not a test): robot-steps per second of the vector environments.
+"""
+Benchmark (not a test): robot-steps per second of the vector environments.
 
 Lumped: LumpedPumpValveVectorEnv (one numba call per control period advances all N robots) for
-N = 1, 64, 1024, 16384, pump_cycle scene, dt = 1e-4 s, RK4, pump on with the valve shut then jetting,
-with the vectorised atanh (exact=False, the default) and with libm's (exact=True, bit for bit the
-single-robot env); a robot-step is one physics step (dt) of one robot; real-time factor = simulated
-robot-seconds per wall second, per core (one process, one thread: the kernel has no parallel loops).
+N = 1, 64, 1024, 16384, pump_cycle scene, dt = 1e-4 s, RK4, pump on with the valve shut then
+jetting, with the vectorised atanh (exact=False, the default) and with libm's (exact=True, bit for
+bit the single-robot env); a robot-step is one physics step (dt) of one robot; real-time factor =
+simulated robot-seconds per wall second, per core (one process, one thread: the kernel has no
+parallel loops).
 Wall and CPU (process) time are both given: the machine is shared, and the CPU time is the better
 measure of a loaded run. Shell: ShellCableEnv in an AsyncVectorEnv with N worker processes
 (shell_robot, dt = 1e-2 s). Writes benchmarks/results/envs.md, keeping the previous run's table
@@ -12,20 +14,20 @@ below the new one.
 
     .venv/bin/python benchmarks/bench_envs.py [--robot-steps 4e6]
 """
+
 from __future__ import annotations
 
 import argparse
 import os
+from pathlib import Path
 import sys
 import time
-from pathlib import Path
-
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_common import RESULTS, header, write  # noqa: E402
+from bench_common import header, RESULTS, write  # noqa: E402
+import numpy as np  # noqa: E402
 from pulsejet_sim.envs import LumpedPumpValveVectorEnv, make_shell_vector_env  # noqa: E402
 
 
@@ -35,7 +37,7 @@ def bench_lumped(n: int, robot_steps: float, exact: bool = False):
     env.reset(seed=0)
     inflate = np.tile([2.5e-3, 0.0], (n, 1))
     jet = np.tile([0.0, 1.0], (n, 1))
-    env.step(inflate)   # warm-up (the kernel is compiled or loaded in __init__)
+    env.step(inflate)  # warm-up (the kernel is compiled or loaded in __init__)
     calls = max(2, int(robot_steps / (n * env.n_steps)))
     start = time.perf_counter()
     cpu0 = time.process_time()
@@ -64,7 +66,9 @@ def bench_shell(n: int, periods: int = 20):
 
 def main() -> int:
     ap = argparse.ArgumentParser()
-    ap.add_argument('--robot-steps', type=float, default=4e6, help='physics robot-steps per lumped case')
+    ap.add_argument(
+        '--robot-steps', type=float, default=4e6, help='physics robot-steps per lumped case'
+    )
     args = ap.parse_args()
     previous = (RESULTS / 'envs.md').read_text() if (RESULTS / 'envs.md').exists() else ''
     load_before = os.getloadavg()
@@ -73,24 +77,37 @@ def main() -> int:
         kind = 'libm atanh, bit for bit single env' if exact else 'vectorised atanh (default)'
         for n in (1, 64, 1024, 16384):
             sps, rtf, calls, wall, cpu, sps_cpu = bench_lumped(n, args.robot_steps, exact)
-            rows.append(f'| lumped, vector env, {kind} | {n} | {calls} x 100 steps | {wall:.2f} | {cpu:.2f} | '
-                        f'{sps:,.0f} | {sps_cpu:,.0f} | {rtf:,.0f}x |')
+            rows.append(
+                f'| lumped, vector env, {kind} | {n} | {calls} x 100 steps | {wall:.2f} | '
+                f'{cpu:.2f} | {sps:,.0f} | {sps_cpu:,.0f} | {rtf:,.0f}x |'
+            )
     for n in (1, 2):
         sps, rtf, wall = bench_shell(n)
-        rows.append(f'| shell, AsyncVectorEnv ({n} worker process{"es" if n > 1 else ""}) | {n} | 20 x 5 steps | '
-                    f'{wall:.2f} | | {sps:,.0f} | | {rtf:,.1f}x |')
+        rows.append(
+            f'| shell, AsyncVectorEnv ({n} worker process{"es" if n > 1 else ""}) | {n} | '
+            f'20 x 5 steps | {wall:.2f} | | {sps:,.0f} | | {rtf:,.1f}x |'
+        )
     load_after = os.getloadavg()
-    text = header('Vector environments: robot-steps per second', 'python benchmarks/bench_envs.py') + (
-        'A robot-step is one physics step of one robot (lumped: RK4, dt = 1e-4 s; shell: implicit midpoint, '
-        'dt = 1e-2 s). Real-time factor = simulated robot-seconds per wall second; the lumped rows run on '
-        'one core (one process, one thread; the kernel has no parallel loops), the shell rows on one core per '
-        'worker. CPU s: the process\'s CPU time (the shell rows: the workers\' is not counted). '
+    text = header(
+        'Vector environments: robot-steps per second', 'python benchmarks/bench_envs.py'
+    ) + (
+        'A robot-step is one physics step of one robot (lumped: RK4, dt = 1e-4 s; shell: '
+        'implicit midpoint, dt = 1e-2 s). Real-time factor = simulated robot-seconds per wall '
+        'second; the lumped rows run on one core (one process, one thread; the kernel has no '
+        'parallel loops), the shell rows on one core per worker. '
+        "CPU s: the process's CPU time (the shell rows: the workers' is not counted). "
         f'Load average (1 min) before {load_before[0]:.2f}, after {load_after[0]:.2f} on '
-        f'{os.cpu_count()} cores' + (': measured on a loaded machine, the wall figures are low.'
-                                     if max(load_before[0], load_after[0]) > 1.0 else '.') + '\n\n'
-        '| case | robots N | calls | wall s | CPU s | robot-steps / wall s | robot-steps / CPU s | real-time factor |\n'
-        '|---|---:|---:|---:|---:|---:|---:|---:|\n'
-        + '\n'.join(rows) + '\n')
+        f'{os.cpu_count()} cores'
+        + (
+            ': measured on a loaded machine, the wall figures are low.'
+            if max(load_before[0], load_after[0]) > 1.0
+            else '.'
+        )
+        + '\n\n'
+        '| case | robots N | calls | wall s | CPU s | robot-steps / wall s | robot-steps / CPU s '
+        '| real-time factor |\n'
+        '|---|---:|---:|---:|---:|---:|---:|---:|\n' + '\n'.join(rows) + '\n'
+    )
     if previous:
         # keep the previous run's table (not its own previous one) for comparison
         prev = previous.split('\n## Previous run', 1)[0].split('\n', 1)[-1].strip()

@@ -1,13 +1,16 @@
-"""Gymnasium environments (issue 9): check_env, seeding, faults, the batched lumped kernel against
-single-robot runs, the 16384-robot vector env and the shell robots in worker processes."""
+"""
+Gymnasium environments (issue 9).
+
+check_env, seeding, faults, the batched lumped kernel against single-robot runs, the 16384-robot
+vector env and the shell robots in worker processes.
+"""
+
 import math
 import warnings
 
 import gymnasium as gym
-import numpy as np
-import pytest
 from gymnasium.utils.env_checker import check_env
-
+import numpy as np
 import pulsejet_sim.envs as E
 from pulsejet_sim.envs.rewards import REWARDS
 from pulsejet_sim.models import lumped_batch as B
@@ -15,11 +18,13 @@ from pulsejet_sim.models import lumped_kernels as K
 from pulsejet_sim.models.base import Command
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.simulation import Simulation
+import pytest
 
 
 def _check(env):
     with warnings.catch_warnings():
-        warnings.simplefilter('ignore')   # the checker's advice on infinite rate bounds, non-[-1, 1] actions
+        # the checker's advice on infinite rate bounds, non-[-1, 1] actions
+        warnings.simplefilter('ignore')
         check_env(env.unwrapped, skip_render_check=True)
 
 
@@ -61,8 +66,8 @@ def test_lumped_rewards_and_seeding(reward):
     t1, r1, truncated, info = episode(7)
     t2, r2, _, _ = episode(7)
     t3, _, _, _ = episode(8)
-    assert np.array_equal(t1, t2) and np.array_equal(r1, r2)     # a seed fixes the episode
-    assert not np.array_equal(t1[0], t3[0])                      # another seed another b(0)
+    assert np.array_equal(t1, t2) and np.array_equal(r1, r2)  # a seed fixes the episode
+    assert not np.array_equal(t1[0], t3[0])  # another seed another b(0)
     assert truncated and np.all(np.isfinite(r1))
     if reward == 'cost_of_transport':
         # the return telescopes to minus the episode's cost of transport
@@ -104,64 +109,87 @@ def test_batch_kernel_equals_single_robot_runs_bit_for_bit():
         for _ in range(3):
             sim.step(700, cmd)
         assert np.array_equal(sim.state, Y[i]), i
-    assert np.array_equal(Y[0], Y[1])            # identical robots, identical trajectories
+    assert np.array_equal(Y[0], Y[1])  # identical robots, identical trajectories
     assert not np.array_equal(Y[0], Y[3]) and not np.array_equal(Y[2], Y[3])
 
 
 def _batch_against_single(scene, overrides, n, exact, calls=10, steps=300, fault_phase=False):
-    """Run n robots (per-robot stiffness and b(0), random commands that seal, throttle and open the
-    valve) through the batch kernel and each robot through the single-robot kernel; returns
-    (batch states, single states, batch done/status, single done/status, component scales)."""
+    """
+    Run n robots through the batch kernel and each robot through the single-robot kernel.
+
+    The robots have per-robot stiffness and b(0) and get random commands that seal, throttle and
+    open the valve. Returns (batch states, single states, batch done/status, single done/status,
+    component scales).
+    """
     model = load_scene(scene, overrides).model
     rng = np.random.default_rng(5)
     Y = np.tile(model.initial_state(), (n, 1))
     Y[:, K.Y_B] *= 1.0 + rng.uniform(-0.02, 0.02, n)
     P = np.ascontiguousarray(np.tile(model.params, (n, 1)))
     P[:, K.P_K] *= 1.0 + rng.uniform(-0.1, 0.1, n)
-    if fault_phase:   # every other robot gets a lower bound of b just below its b(0): it trips mid-call
+    if fault_phase:
+        # every other robot gets a lower bound of b just below its b(0): it trips mid-call
         P[::2, K.P_B_MIN] = Y[::2, K.Y_B] * (1.0 - rng.uniform(0.002, 0.02, P[::2].shape[0]))
     Ys = Y.copy()
     done, status = np.zeros(n, np.int64), np.zeros(n, np.int64)
     done_s, status_s = np.zeros(n, np.int64), np.zeros(n, np.int64)
     kernel = B.batch_kernel(model.flags)
-    single = K.specialised(K.advance, model.flags, model.initial_state(), model.params, 0.0, 0.0, 0, model.dt_s)
+    single = K.specialised(
+        K.advance, model.flags, model.initial_state(), model.params, 0.0, 0.0, 0, model.dt_s
+    )
     scale = np.zeros(K.NY)
     for call in range(calls):
         if fault_phase:
             q, v = np.zeros(n), np.ones(n)
         else:
             q = rng.choice([0.0, 1e-3, 2.5e-3, 5e-3], n)
-            v = rng.choice([0.0, 0.005, 0.3, 1.0], n)   # 0.005: RK4 sub-steps; 1 -> 0: the valve seals
+            # 0.005: RK4 sub-steps; 1 -> 0: the valve seals
+            v = rng.choice([0.0, 0.005, 0.3, 1.0], n)
         kernel(model.flags, Y, P, q, v, steps, model.dt_s, done, status, exact)
         for i in range(n):
             if status_s[i] == K.OK:
-                done_s[i], status_s[i] = single(model.flags, Ys[i], P[i], q[i], v[i], steps, model.dt_s)
+                done_s[i], status_s[i] = single(
+                    model.flags, Ys[i], P[i], q[i], v[i], steps, model.dt_s
+                )
             else:
                 done_s[i] = 0
         scale = np.maximum(scale, np.abs(Ys).max(axis=0))
-        if exact:   # every call, not only the last
-            assert np.array_equal(Y, Ys) and np.array_equal(done, done_s) and np.array_equal(status, status_s), call
+        if exact:  # every call, not only the last
+            assert (
+                np.array_equal(Y, Ys)
+                and np.array_equal(done, done_s)
+                and np.array_equal(status, status_s)
+            ), call
     return Y, Ys, status, status_s, scale
 
 
-@pytest.mark.parametrize('scene, overrides, fault_phase', [
-    ('pump_cycle', None, False),
-    ('pump_cycle', {'options': {'coupling': 'paper', 'added_mass_form': 'simplified'}}, False),
-    ('escape', {'options': {'coupling': 'paper'}}, True),      # the shell collapses: faults mid-call
-])
+@pytest.mark.parametrize(
+    'scene, overrides, fault_phase',
+    [
+        ('pump_cycle', None, False),
+        ('pump_cycle', {'options': {'coupling': 'paper', 'added_mass_form': 'simplified'}}, False),
+        # the shell collapses: faults mid-call
+        ('escape', {'options': {'coupling': 'paper'}}, True),
+    ],
+)
 def test_vector_batch_kernel_equals_single_robot_runs_bit_for_bit(scene, overrides, fault_phase):
-    # 100 robots: one full SIMD block of 64 and a padded one of 36 (the vector path, not the one-at-a-time
-    # path of a few robots); exact=True (libm's atanh) must equal the single-robot kernel bit for bit,
-    # also for the steps it hands to _advance (sub-steps, sealing) and for robots that fail
-    Y, Ys, status, status_s, _ = _batch_against_single(scene, overrides, 100, True, fault_phase=fault_phase)
+    # 100 robots: one full SIMD block of 64 and a padded one of 36 (the vector path, not the
+    # one-at-a-time path of a few robots); exact=True (libm's atanh) must equal the single-robot
+    # kernel bit for bit, also for the steps it hands to _advance (sub-steps, sealing) and for
+    # robots that fail
+    Y, Ys, status, status_s, _ = _batch_against_single(
+        scene, overrides, 100, True, fault_phase=fault_phase
+    )
     if fault_phase:
-        assert np.all(status[::2] == K.ERR_B_LOW) and np.all(status[1::2] == K.OK)  # flagged, others go on
-        assert np.all(np.isfinite(Y))                       # the last good state, no nan
+        # flagged, others go on
+        assert np.all(status[::2] == K.ERR_B_LOW) and np.all(status[1::2] == K.OK)
+        assert np.all(np.isfinite(Y))  # the last good state, no nan
 
 
 def test_vector_batch_kernel_fast_atanh_within_tolerance():
     # exact=False: the vectorised atanh (about 1 ulp like libm's, and equal to it for most inputs);
-    # the trajectories may then differ by the rounding of atanh only: 1e-12 of each component's scale
+    # the trajectories may then differ by the rounding of atanh only: 1e-12 of each component's
+    # scale
     Y, Ys, status, status_s, scale = _batch_against_single('pump_cycle', None, 100, False)
     assert np.array_equal(status, status_s) and np.all(status == K.OK)
     assert np.all(np.abs(Y - Ys) <= 1e-12 * scale)
@@ -169,25 +197,37 @@ def test_vector_batch_kernel_fast_atanh_within_tolerance():
 
 def test_vector_fast_atanh_accuracy():
     rng = np.random.default_rng(0)
-    x = np.concatenate([rng.uniform(0.0, 1.0, 200_000), 1.0 - 10.0 ** rng.uniform(-16, 0, 100_000),
-                        10.0 ** rng.uniform(-300, 0, 50_000)])
+    x = np.concatenate(
+        [
+            rng.uniform(0.0, 1.0, 200_000),
+            1.0 - 10.0 ** rng.uniform(-16, 0, 100_000),
+            10.0 ** rng.uniform(-300, 0, 50_000),
+        ]
+    )
     f = B.atanh_fast(x)
     ref = np.arctanh(x.astype(np.longdouble))
     ulps = np.abs((f.astype(np.longdouble) - ref) / np.spacing(np.abs(f)).astype(np.longdouble))
-    assert ulps.max() <= 2.0    # libm's own atanh: 1.65 ulp on these inputs
+    assert ulps.max() <= 2.0  # libm's own atanh: 1.65 ulp on these inputs
     libm = np.array([math.atanh(v) for v in x[:20_000]])
     assert np.mean(f[:20_000] == libm) > 0.99
     special = B.atanh_fast(np.array([0.0, 1.0, 1.5, np.nan, 5e-324, 0.5]))
-    assert special[0] == 0.0 and special[1] == np.inf and np.isnan(special[2]) and np.isnan(special[3])
+    assert (
+        special[0] == 0.0
+        and special[1] == np.inf
+        and np.isnan(special[2])
+        and np.isnan(special[3])
+    )
     assert special[4] == 5e-324 and special[5] == math.atanh(0.5)
 
 
 def test_vector_env_16384_robots_one_call():
-    env = E.LumpedPumpValveVectorEnv(16384, control_period_s=1e-3, reward='mean_speed', initial_b_jitter=0.0)
+    env = E.LumpedPumpValveVectorEnv(
+        16384, control_period_s=1e-3, reward='mean_speed', initial_b_jitter=0.0
+    )
     obs, _ = env.reset(seed=1)
     assert obs.shape == (16384, 6)
     actions = np.zeros((16384, 2))
-    actions[:, 0] = np.linspace(0.0, 5e-3, 16384)   # different pump flows per robot
+    actions[:, 0] = np.linspace(0.0, 5e-3, 16384)  # different pump flows per robot
     for _ in range(3):
         obs, reward, terminated, truncated, info = env.step(actions)
     assert reward.shape == (16384,) and np.all(np.isfinite(reward)) and not terminated.any()
@@ -198,7 +238,7 @@ def test_vector_env_16384_robots_one_call():
 
 
 def test_vector_env_matches_single_env_and_autoresets():
-    kw = dict(initial_b_jitter=0.0, max_episode_s=0.15, reward='distance')
+    kw = {'initial_b_jitter': 0.0, 'max_episode_s': 0.15, 'reward': 'distance'}
     venv = E.LumpedPumpValveVectorEnv(2, exact=True, **kw)
     env = E.LumpedPumpValveEnv(**kw)
     vobs, _ = venv.reset(seed=0)
@@ -209,7 +249,7 @@ def test_vector_env_matches_single_env_and_autoresets():
         obs, r, term, trunc, _ = env.step(a[0])
         assert np.array_equal(vobs[0], obs) and vr[0] == r and vtrunc[0] == trunc
     assert vtrunc.all()
-    vobs, vr, vterm, vtrunc, _ = venv.step(a)   # NEXT_STEP autoreset: back to the initial state
+    vobs, vr, vterm, vtrunc, _ = venv.step(a)  # NEXT_STEP autoreset: back to the initial state
     assert np.array_equal(vobs[0], env.reset()[0]) and np.all(vr == 0.0)
 
 
@@ -218,7 +258,7 @@ def test_shell_robots_in_worker_processes():
     try:
         obs, _ = venv.reset(seed=[1, 2])
         assert obs.shape == (2, 5)
-        assert not np.array_equal(obs[0], obs[1])   # seeds 1 and 2: different wall perturbations
+        assert not np.array_equal(obs[0], obs[1])  # seeds 1 and 2: different wall perturbations
         obs, reward, terminated, truncated, info = venv.step(np.array([[8.0], [0.0]]))
         assert np.all(np.isfinite(reward)) and not terminated.any()
         assert obs[0, 4] == 8.0 and obs[1, 4] == 0.0

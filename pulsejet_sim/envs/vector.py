@@ -1,31 +1,38 @@
-"""N lumped robots as one gymnasium vector environment, advanced by one numba call per control
-period (``lumped_batch.advance_batch``: the single-robot RK4 step and right-hand side, vectorised over
-blocks of robots, no Python object per robot).
+"""
+N lumped robots as one gymnasium vector environment, advanced by one numba call per control period.
+
+The call is ``lumped_batch.advance_batch``: the single-robot RK4 step and right-hand side,
+vectorised over blocks of robots, no Python object per robot.
 
 Spaces, actions, observations, rewards and faults are those of ``LumpedPumpValveEnv``, batched:
-actions (N, 2), observations (N, 6), rewards, terminations and truncations (N,). All robots share one
-scene's parameters (``params`` may give one row per robot instead, shape (N, lumped_kernels.NP)).
-``exact``: False (default) uses the vectorised atanh of Lamb's added mass (as accurate as libm's, and
-equal to it for nearly all inputs; trajectories agree with LumpedPumpValveEnv to 1e-12 of each
-component's scale), True libm's (bit for bit LumpedPumpValveEnv, about 25 % fewer robot-steps/s).
+actions (N, 2), observations (N, 6), rewards, terminations and truncations (N,). All robots share
+one scene's parameters (``params`` may give one row per robot instead, shape
+(N, lumped_kernels.NP)). ``exact``: False (default) uses the vectorised atanh of Lamb's added mass
+(as accurate as libm's, and equal to it for nearly all inputs; trajectories agree with
+LumpedPumpValveEnv to 1e-12 of each component's scale), True libm's (bit for bit
+LumpedPumpValveEnv, about 25 % fewer robot-steps/s).
 Autoreset: gymnasium's ``NEXT_STEP`` mode: the step after a robot's episode ended resets that robot
 (its action is ignored, reward 0); ``info['fault']`` holds the robots' fault codes
 (lumped_kernels.ERR_*, 0: none). Only the fixed-step RK4 integrator (the scene's ``dt_s``) runs in
 batch.
 """
+
 from __future__ import annotations
 
 import math
 from typing import Any
 
-import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
-
+import numpy as np
 from pulsejet_sim.envs import rewards as R
-from pulsejet_sim.envs.lumped_env import (lumped_mass_kg, lumped_observation, lumped_spaces,
-                                          steps_per_period)
+from pulsejet_sim.envs.lumped_env import (
+    lumped_mass_kg,
+    lumped_observation,
+    lumped_spaces,
+    steps_per_period,
+)
 from pulsejet_sim.models import lumped_batch as B
 from pulsejet_sim.models import lumped_kernels as K
 from pulsejet_sim.scene import load_scene
@@ -34,17 +41,31 @@ from pulsejet_sim.scene import load_scene
 class LumpedPumpValveVectorEnv(VectorEnv):
     metadata = {'render_modes': [], 'autoreset_mode': AutoresetMode.NEXT_STEP}
 
-    def __init__(self, num_envs: int = 64, scene: str = 'pump_cycle', scene_overrides: dict | None = None,
-                 control_period_s: float = 0.05, max_episode_s: float = 10.0, reward: str = 'distance',
-                 target_speed_m_s: float = 0.2, fault_penalty: float = 100.0, initial_b_jitter: float = 0.02,
-                 cot_min_distance_m: float = 0.01, params: np.ndarray | None = None, exact: bool = False):
+    def __init__(
+        self,
+        num_envs: int = 64,
+        scene: str = 'pump_cycle',
+        scene_overrides: dict | None = None,
+        control_period_s: float = 0.05,
+        max_episode_s: float = 10.0,
+        reward: str = 'distance',
+        target_speed_m_s: float = 0.2,
+        fault_penalty: float = 100.0,
+        initial_b_jitter: float = 0.02,
+        cot_min_distance_m: float = 0.01,
+        params: np.ndarray | None = None,
+        exact: bool = False,
+    ):
         if int(num_envs) < 1:
             raise ValueError(f'num_envs={num_envs!r} rejected; allowed: an integer >= 1')
         self.num_envs = int(num_envs)
         self.scene = load_scene(scene, scene_overrides)
         self.model = self.scene.model
         if self.model.name != 'lumped' or self.model.integrator != 'rk4':
-            raise ValueError(f'scene {scene!r} rejected; allowed: a lumped scene with simulation.integrator: rk4')
+            raise ValueError(
+                f'scene {scene!r} rejected; allowed: a lumped scene with '
+                'simulation.integrator: rk4'
+            )
         self.reward_name = R.check_reward(reward)
         self.n_steps = steps_per_period(control_period_s, self.model.dt_s)
         self.control_period_s = self.n_steps * self.model.dt_s
@@ -60,7 +81,9 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         else:
             self.P = np.ascontiguousarray(np.asarray(params, dtype=np.float64))
             if self.P.shape != (n, K.NP):
-                raise ValueError(f'params of shape {self.P.shape} rejected; allowed: ({n}, {K.NP})')
+                raise ValueError(
+                    f'params of shape {self.P.shape} rejected; allowed: ({n}, {K.NP})'
+                )
         self.mass_kg = np.array([lumped_mass_kg(row) for row in self.P])
         self.single_observation_space, self.single_action_space = lumped_spaces(self.model.params)
         self.observation_space = batch_space(self.single_observation_space, n)
@@ -81,8 +104,9 @@ class LumpedPumpValveVectorEnv(VectorEnv):
             u = self._rng.uniform(-self.initial_b_jitter, self.initial_b_jitter, size=rows.size)
             self.Y[rows, K.Y_B] *= 1.0 + u
             if y0[K.Y_VALVE] <= 0.0:
-                self.Y[rows, K.Y_W] = self.Y[rows, K.Y_QP] / (8.0 / 3.0 * math.pi * self.P[rows, K.P_A]
-                                                              * self.Y[rows, K.Y_B])
+                self.Y[rows, K.Y_W] = self.Y[rows, K.Y_QP] / (
+                    8.0 / 3.0 * math.pi * self.P[rows, K.P_A] * self.Y[rows, K.Y_B]
+                )
         self.Y0[rows] = self.Y[rows]
         self.periods[rows] = 0
         self.status[rows] = K.OK
@@ -100,7 +124,11 @@ class LumpedPumpValveVectorEnv(VectorEnv):
 
     def step(self, actions):
         act = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2)
-        act = np.clip(np.nan_to_num(act, nan=0.0), self.single_action_space.low, self.single_action_space.high)
+        act = np.clip(
+            np.nan_to_num(act, nan=0.0),
+            self.single_action_space.low,
+            self.single_action_space.high,
+        )
         restart = np.flatnonzero(self._ended)
         if restart.size:
             self._reset_rows(restart)
@@ -109,24 +137,46 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         q = np.ascontiguousarray(act[:, 0])
         v = np.ascontiguousarray(act[:, 1])
         if restart.size:
-            self.status[restart] = -1     # just reset: not advanced this call (NEXT_STEP autoreset)
-        self._kernel(self.model.flags, self.Y, self.P, q, v, self.n_steps, self.model.dt_s, self.done, self.status,
-                     self.exact)
+            self.status[restart] = -1  # just reset: not advanced this call (NEXT_STEP autoreset)
+        self._kernel(
+            self.model.flags,
+            self.Y,
+            self.P,
+            q,
+            v,
+            self.n_steps,
+            self.model.dt_s,
+            self.done,
+            self.status,
+            self.exact,
+        )
         if restart.size:
             self.status[restart] = K.OK
             self.periods[restart] = -1
         self.periods += 1
         terminated = self.status != K.OK
         truncated = ~terminated & (self.periods >= self.max_periods)
-        reward = R.reward(self.reward_name, x0=x0, x1=self.Y[:, K.Y_X], x_start=self.Y0[:, K.Y_X], work0=w0,
-                          work1=self.Y[:, K.Y_W_PUMP], period_s=self.control_period_s, mass_kg=self.mass_kg,
-                          target_speed_m_s=self.target_speed_m_s, d_min_m=self.cot_min_distance_m)
+        reward = R.reward(
+            self.reward_name,
+            x0=x0,
+            x1=self.Y[:, K.Y_X],
+            x_start=self.Y0[:, K.Y_X],
+            work0=w0,
+            work1=self.Y[:, K.Y_W_PUMP],
+            period_s=self.control_period_s,
+            mass_kg=self.mass_kg,
+            target_speed_m_s=self.target_speed_m_s,
+            d_min_m=self.cot_min_distance_m,
+        )
         reward = np.where(terminated, -self.fault_penalty, reward)
         if restart.size:
             reward[restart] = 0.0
             terminated[restart] = False
             truncated[restart] = False
         self._ended = terminated | truncated
-        info = {'fault': self.status.copy(), 'position_m': self.Y[:, K.Y_X].copy(),
-                'actuation_work_j': self.Y[:, K.Y_W_PUMP].copy()}
+        info = {
+            'fault': self.status.copy(),
+            'position_m': self.Y[:, K.Y_X].copy(),
+            'actuation_work_j': self.Y[:, K.Y_W_PUMP].copy(),
+        }
         return self._obs(), reward.astype(np.float64), terminated, truncated, info

@@ -1,13 +1,14 @@
-"""numba kernels that advance N lumped robots in one call (the vector environment's engine).
+"""
+Numba kernels that advance N lumped robots in one call (the vector environment's engine).
 
 Same physics, same arithmetic: the right-hand side below is ``lumped_kernels.rhs`` written for a
-block of robots (the same expressions in the same order, specialised on the same literal term flags),
-and the step is ``lumped_kernels._advance``'s RK4 step (same stage sums, same valve stroke, same
-bound checks ``_check``). Only the order of the loops differs: robots are innermost inside each RK
-stage, so that LLVM vectorises the stage over robots (AVX2: 4 robots per instruction).
+block of robots (the same expressions in the same order, specialised on the same literal term
+flags), and the step is ``lumped_kernels._advance``'s RK4 step (same stage sums, same valve stroke,
+same bound checks ``_check``). Only the order of the loops differs: robots are innermost inside
+each RK stage, so that LLVM vectorises the stage over robots (AVX2: 4 robots per instruction).
 
-Layout, as seen by LLVM: the robots are cut into blocks of ``BLOCK`` robots (the last block padded with
-copies of a real robot, never written back); a block's states, RK stage values, stage sums and
+Layout, as seen by LLVM: the robots are cut into blocks of ``BLOCK`` robots (the last block padded
+with copies of a real robot, never written back); a block's states, RK stage values, stage sums and
 hoisted per-robot parameters live in one flat work array at compile-time-constant offsets
 (``row * BLOCK + j``), so that every stage loop has a constant trip count and provably disjoint
 accesses (no runtime alias checks, no scalar fallback). Data-dependent ``if``s of the single-robot
@@ -17,13 +18,14 @@ are both computed, which gives the same value as the branch; the untaken side ma
 
 Transcendental functions: Lamb's added mass needs ``atanh(e)`` four times a step, and libm's atanh
 is a scalar call (about 27 ns) that LLVM cannot vectorise. It is evaluated in its own pass over the
-block: ``exact=True`` calls ``math.atanh`` (libm), and the batch then equals N single-robot runs bit
-for bit (tested); ``exact=False`` uses ``_atanh_fast``, fdlibm's log1p algorithm written branch-free
-(polynomial of Sun Microsystems' e_log/s_log1p, the exponent split by integer bit operations), which
-vectorises. Its error is at most 1.65 ulp on 3.5e6 inputs against an extended-precision reference (libm: the same;
-tested), like libm's own; the batch then differs from single-robot runs only by the rounding of
-atanh, a relative 1e-16 per evaluation that the (damped, non-chaotic) dynamics carry to below 1e-12
-of each state component's scale over thousands of steps (tested at that tolerance).
+block: ``exact=True`` calls ``math.atanh`` (libm), and the batch then equals N single-robot runs
+bit for bit (tested); ``exact=False`` uses ``_atanh_fast``, fdlibm's log1p algorithm written
+branch-free (polynomial of Sun Microsystems' e_log/s_log1p, the exponent split by integer bit
+operations), which vectorises. Its error is at most 1.65 ulp on 3.5e6 inputs against an
+extended-precision reference (libm: the same; tested), like libm's own; the batch then differs from
+single-robot runs only by the rounding of atanh, a relative 1e-16 per evaluation that the (damped,
+non-chaotic) dynamics carry to below 1e-12 of each state component's scale over thousands of steps
+(tested at that tolerance).
 
 Steps that the vector path does not take: a robot whose step needs RK4 stability sub-steps
 (``rate * dt > 1.5``: a throttled fast flow or a stiff light shell) or whose valve seals a moving
@@ -32,38 +34,39 @@ single-robot step; rare). A robot whose step fails keeps its last good state, ge
 ``status`` (lumped_kernels.ERR_*) and is skipped by later calls until the caller resets it
 (``status[i] = OK``); ``done[i]`` counts the steps it made, as in ``_advance``.
 
-Arrays: states ``Y`` (N, NY) and parameters ``P`` (N, NP), C-contiguous, one row per robot; commands
-``q_cmd`` and ``valve_cmd`` (N,).
+Arrays: states ``Y`` (N, NY) and parameters ``P`` (N, NP), C-contiguous, one row per robot;
+commands ``q_cmd`` and ``valve_cmd`` (N,).
 """
+
 from __future__ import annotations
 
 import math
 
-import numpy as np
 from llvmlite import ir
 from numba import literally, njit, types
 from numba.extending import intrinsic
-
+import numpy as np
 from pulsejet_sim.models import lumped_kernels as K
 
-BLOCK = 32            # robots per block (a multiple of the SIMD width; the block's rows stay in L1/L2)
-SCALAR_BELOW = 16     # a last block with fewer robots runs them one at a time (lumped_kernels._advance)
+BLOCK = 32  # robots per block (a multiple of the SIMD width; the block's rows stay in L1/L2)
+# a last block with fewer robots runs them one at a time (lumped_kernels._advance)
+SCALAR_BELOW = 16
 
 # ---- rows of a block's work array (each BLOCK long) ---------------------------------------------
-R_Y = 0                       # committed state, K.NY rows (component c at R_Y + c)
-R_ACC = R_Y + K.NY            # RK4 stage sum k1 + 2 k2 + 2 k3 + k4 of the integrated components
+R_Y = 0  # committed state, K.NY rows (component c at R_Y + c)
+R_ACC = R_Y + K.NY  # RK4 stage sum k1 + 2 k2 + 2 k3 + k4 of the integrated components
 R_TU = R_ACC + K.N_INTEGRATED  # stage state (the components that rhs reads)
 R_TB = R_TU + 1
 R_TW = R_TU + 2
 R_TQ = R_TU + 3
-R_E2 = R_TU + 4               # e^2 = 1 - (b/a)^2 and e of the spheroid at the stage's b
+R_E2 = R_TU + 4  # e^2 = 1 - (b/a)^2 and e of the spheroid at the stage's b
 R_E = R_TU + 5
-R_G = R_TU + 6                # atanh(e)
-R_SLOW = R_TU + 7             # 1: the step is taken by lumped_kernels._advance (sub-steps or sealing)
-R_ACTIVE = R_TU + 8           # 1: a real robot still advancing
+R_G = R_TU + 6  # atanh(e)
+R_SLOW = R_TU + 7  # 1: the step is taken by lumped_kernels._advance (sub-steps or sealing)
+R_ACTIVE = R_TU + 8  # 1: a real robot still advancing
 R_DONE = R_TU + 9
 R_STATUS = R_TU + 10
-R_Q = R_TU + 11               # commands
+R_Q = R_TU + 11  # commands
 R_V = R_TU + 12
 # per-robot parameters and constant sub-expressions of rhs (each computed as rhs computes it)
 R_RHO = R_TU + 13
@@ -74,22 +77,22 @@ R_RELIEF = R_RHO + 4
 R_STALL = R_RHO + 5
 R_TAU = R_RHO + 6
 R_A_N = R_RHO + 7
-R_C_A = R_RHO + 8             # 8/3 pi a
+R_C_A = R_RHO + 8  # 8/3 pi a
 R_M_SHELL = R_RHO + 9
-R_INERTANCE = R_RHO + 10      # rho L_n / A_n
-R_LAM = R_RHO + 11            # 32 mu L_n / d_n^2
+R_INERTANCE = R_RHO + 10  # rho L_n / A_n
+R_LAM = R_RHO + 11  # 32 mu L_n / d_n^2
 R_K_INLET = R_RHO + 12
 R_M_SOLID = R_RHO + 13
 R_V_SOLID = R_RHO + 14
 R_CD = R_RHO + 15
 R_C1 = R_RHO + 16
-R_VOL_COEF = R_RHO + 17       # rho 4/3 pi a (Lamb's added mass)
+R_VOL_COEF = R_RHO + 17  # rho 4/3 pi a (Lamb's added mass)
 R_B_MIN = R_RHO + 18
 R_B_MAX = R_RHO + 19
 R_U_MAX = R_RHO + 20
-R_STROKE = R_RHO + 21         # valve stroke per step, valve_rate dt
-R_CONTRACTION = R_RHO + 22    # the valve's 1/opening - 1 over the step
-R_SEAL = R_RHO + 23           # 1: the valve seals a moving flow at the end of the step
+R_STROKE = R_RHO + 21  # valve stroke per step, valve_rate dt
+R_CONTRACTION = R_RHO + 22  # the valve's 1/opening - 1 over the step
+R_SEAL = R_RHO + 23  # 1: the valve seals a moving flow at the end of the step
 NROWS = R_RHO + 24
 
 # fdlibm (Sun Microsystems, e_log.c / s_log1p.c) constants
@@ -106,41 +109,48 @@ _LP7 = 1.479819860511658591e-01
 
 @intrinsic
 def _f2i(typingctx, x):
-    """The bits of a float64 as an int64 (an LLVM bitcast: vectorises)."""
+    """Return the bits of a float64 as an int64 (an LLVM bitcast: vectorises)."""
     if isinstance(x, types.Float) and x.bitwidth == 64:
+
         def codegen(context, builder, signature, args):
             return builder.bitcast(args[0], ir.IntType(64))
+
         return types.int64(x), codegen
     return None
 
 
 @intrinsic
 def _i2f(typingctx, i):
-    """The float64 with these bits."""
+    """Return the float64 with these bits."""
     if isinstance(i, types.Integer) and i.bitwidth == 64:
+
         def codegen(context, builder, signature, args):
             return builder.bitcast(args[0], ir.DoubleType())
+
         return types.float64(i), codegen
     return None
 
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _log1p_pos(x):
-    """log(1 + x) for finite x >= 0 without branches: fdlibm's s_log1p (its k = 0 path below
-    0.41422, the exponent split with a rounding correction above; the |f| < 2^-20 shortcut is not
-    needed for accuracy and is left out)."""
+    """
+    Return log(1 + x) for finite x >= 0 without branches.
+
+    fdlibm's s_log1p: its k = 0 path below 0.41422, the exponent split with a rounding correction
+    above; the |f| < 2^-20 shortcut is not needed for accuracy and is left out.
+    """
     small = x < 0.41421356237309503
     u = 1.0 + x
     bits = _f2i(u)
     hu = bits >> 32
     k = (hu >> 20) - 1023
     c = ((1.0 - (u - x)) if k > 0 else (x - (u - 1.0))) / u
-    hm = hu & 0x000fffff
-    big = hm >= 0x6a09e
+    hm = hu & 0x000FFFFF
+    big = hm >= 0x6A09E
     # normalise u to [sqrt(2)/2, sqrt(2)): high word hm | 0x3ff00000, or hm | 0x3fe00000 and k + 1
-    hnew = hm | (0x3fe00000 if big else 0x3ff00000)
+    hnew = hm | (0x3FE00000 if big else 0x3FF00000)
     k = k + 1 if big else k
-    un = _i2f((hnew << 32) | (bits & 0xffffffff))
+    un = _i2f((hnew << 32) | (bits & 0xFFFFFFFF))
     f = un - 1.0
     if small:
         f = x
@@ -156,13 +166,17 @@ def _log1p_pos(x):
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _atanh_fast(x):
-    """atanh(x) for x in [0, 1] (and nan for nan or x > 1, inf at 1), as libm: glibc's e_atanh split
-    (0.5 log1p(2x + 2x^2/(1-x)) below 0.5, 0.5 log1p(2x/(1-x)) above) over a vectorisable log1p."""
+    """
+    Return atanh(x) for x in [0, 1] (and nan for nan or x > 1, inf at 1), as libm.
+
+    glibc's e_atanh split (0.5 log1p(2x + 2x^2/(1-x)) below 0.5, 0.5 log1p(2x/(1-x)) above) over
+    a vectorisable log1p.
+    """
     t = x + x
     low = x < 0.5
     q = (t * x if low else t) / (1.0 - x)
     arg = t + q if low else q
-    ok = x < 1.0          # false for nan and x >= 1
+    ok = x < 1.0  # false for nan and x >= 1
     r = 0.5 * _log1p_pos(arg if ok else 0.0)
     if not ok:
         r = math.inf if x == 1.0 else math.nan
@@ -180,15 +194,20 @@ def atanh_fast(x):
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _exact_added_mass(flags):
-    return (flags & (K.T_ADDED_MASS | K.T_ADDED_MASS_VARIATION)) and not flags & K.O_ADDED_MASS_SIMPLIFIED
+    return (
+        flags & (K.T_ADDED_MASS | K.T_ADDED_MASS_VARIATION)
+    ) and not flags & K.O_ADDED_MASS_SIMPLIFIED
 
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _rhs(flags, W, j, u, b, w, q_p):
-    """lumped_kernels.rhs for robot j of the block at the stage state (u, b, w, q_p), branch-free;
-    returns the 16 derivatives and (damping rate, spring rate) of the diagnostics. ``x ** 2`` is
-    written ``x * x`` and max(a, b) as its select: the values numba computes for them (its integer
-    power and max are calls that stop LLVM's loop vectoriser)."""
+    """
+    Compute lumped_kernels.rhs for robot j of the block at the stage state (u, b, w, q_p).
+
+    Branch-free; returns the 16 derivatives and (damping rate, spring rate) of the diagnostics.
+    ``x ** 2`` is written ``x * x`` and max(a, b) as its select: the values numba computes for them
+    (its integer power and max are calls that stop LLVM's loop vectoriser).
+    """
     B = BLOCK
     rho = W[R_RHO * B + j]
     valve = W[(R_Y + K.Y_VALVE) * B + j]
@@ -202,7 +221,7 @@ def _rhs(flags, W, j, u, b, w, q_p):
     relief = W[R_RELIEF * B + j]
     stall = W[R_STALL * B + j]
     frac = (stall - p_el) / (stall - relief)
-    q_relief = q_cmd * (frac if frac > 0.0 else 0.0)   # max(0.0, frac) as numba computes it
+    q_relief = q_cmd * (frac if frac > 0.0 else 0.0)  # max(0.0, frac) as numba computes it
     q_target = q_relief if (q_cmd > 0.0 and p_el > relief) else q_cmd
     dq_p = (q_target - q_p) / W[R_TAU * B + j]
     volume = c_a * b * b / 2.0
@@ -220,7 +239,7 @@ def _rhs(flags, W, j, u, b, w, q_p):
         vol_coef = W[R_VOL_COEF * B + j]
         if flags & K.O_ADDED_MASS_SIMPLIFIED:
             c = W[R_C1 * B + j] * rho * 4.0 / 3.0 * math.pi
-            m_x = c * (b * (b * b))          # b ** 3 as numba's integer power computes it
+            m_x = c * (b * (b * b))  # b ** 3 as numba's integer power computes it
             dmx_db = 3.0 * c * (b * b)
         else:
             e2 = W[R_E2 * B + j]
@@ -268,7 +287,7 @@ def _rhs(flags, W, j, u, b, w, q_p):
         k_inlet = W[R_K_INLET * B + j]
         dp_visc_o = lam * u_n + sgn * 0.5 * rho * k_inlet * u_n * u_n
         dpdq += (lam + rho * k_inlet * abs(u_n)) / a_n
-    contraction = W[R_CONTRACTION * B + j]     # 1.0 / valve - 1.0 (constant over the step)
+    contraction = W[R_CONTRACTION * B + j]  # 1.0 / valve - 1.0 (constant over the step)
     dp_valve_o = sgn * 0.5 * rho * contraction * contraction * u_n * u_n
     dpdq += rho * contraction * contraction * abs(u_n) / a_n
     dp_jet_ref_o = sgn * 0.5 * rho * u_n * u_n
@@ -285,8 +304,7 @@ def _rhs(flags, W, j, u, b, w, q_p):
         c_nozzle_o = inertance * v_b * c_a * w * w * w
     dp_n = dp_visc_o + dp_valve_o + dp_jet
     m_b_total_o = m_shell + m_l
-    force = (-k * (b - b0) - f_kx + reaction + v_b * dp_n
-             + inertance * v_b * (dq_p - convective))
+    force = -k * (b - b0) - f_kx + reaction + v_b * dp_n + inertance * v_b * (dq_p - convective)
     dw_o = force / m_b_total_o
     dq_n = dq_p - c_a * w * w - v_b * dw_o
     p_cav_o = dp_visc_o + dp_valve_o + dp_jet_ref_o + inertance * dq_n
@@ -333,15 +351,32 @@ def _rhs(flags, W, j, u, b, w, q_p):
 
     # ledger rates
     out = q_n > 0.0
-    slip = u_n - u          # u_j = q_n / a_n, equal to u_n wherever it is used (out: the valve is open)
+    slip = u_n - u  # u_j = q_n / a_n, equal to u_n wherever it is used (out: the valve is open)
     e_jet = 0.5 * rho * q_n * (slip * slip) if out else 0.0
     e_mix_out = 0.5 * rho * q_in * u * u
     e_mix_in = 0.5 * rho * q_in * u * u + q_n * dp_jet_ref
     e_mix = e_mix_out if out else e_mix_in
     spring_rate = math.sqrt(abs(spring) / m_b_total) if m_b_total > 0.0 else 0.0
-    return (u, du, w, dw, dq_p, p_cav * q_p, e_jet, drag * u, q_n * dp_visc, q_n * dp_valve, e_mix,
-            -f_kx * w, c_jet, c_nozzle, (reaction - reaction_ref) * w, (ram_ref - ram) * u,
-            damping_rate, spring_rate)
+    return (
+        u,
+        du,
+        w,
+        dw,
+        dq_p,
+        p_cav * q_p,
+        e_jet,
+        drag * u,
+        q_n * dp_visc,
+        q_n * dp_valve,
+        e_mix,
+        -f_kx * w,
+        c_jet,
+        c_nozzle,
+        (reaction - reaction_ref) * w,
+        (ram_ref - ram) * u,
+        damping_rate,
+        spring_rate,
+    )
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -381,7 +416,7 @@ def _acc(W, j, c, stage, v):
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _next(W, j, row, c, stage, half, h, v):
-    """The next stage's value of component c: y + h/2 k1, y + h/2 k2, y + h k3."""
+    """Write the next stage's value of component c: y + h/2 k1, y + h/2 k2, y + h k3."""
     B = BLOCK
     if stage < 2:
         W[row * B + j] = W[(R_Y + c) * B + j] + half * v
@@ -391,15 +426,36 @@ def _next(W, j, row, c, stage, half, h, v):
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _stage(flags, W, stage, h, dt):
-    """RK4 stage `stage` (0..3) of every robot of the block at the stage state; accumulates the stage
-    sum and writes the next stage state."""
+    """
+    Take RK4 stage `stage` (0..3) of every robot of the block at the stage state.
+
+    Accumulates the stage sum and writes the next stage state.
+    """
     B = BLOCK
     half = 0.5 * h
     for j in range(B):
-        (d0, d1, d2, d3, d4, d5, d6, d7, d8, d9, d10, d11, d12, d13, d14, d15, damping_rate,
-         spring_rate) = _rhs(flags, W, j, W[R_TU * B + j], W[R_TB * B + j], W[R_TW * B + j], W[R_TQ * B + j])
+        (
+            d0,
+            d1,
+            d2,
+            d3,
+            d4,
+            d5,
+            d6,
+            d7,
+            d8,
+            d9,
+            d10,
+            d11,
+            d12,
+            d13,
+            d14,
+            d15,
+            damping_rate,
+            spring_rate,
+        ) = _rhs(flags, W, j, W[R_TU * B + j], W[R_TB * B + j], W[R_TW * B + j], W[R_TQ * B + j])
         if stage == 0:
-            rate = spring_rate if spring_rate > damping_rate else damping_rate   # numba's max()
+            rate = spring_rate if spring_rate > damping_rate else damping_rate  # numba's max()
             slow = rate * dt > 1.5 or W[R_SEAL * B + j] > 0.0
             W[R_SLOW * B + j] = 1.0 if slow else 0.0
         _acc(W, j, 0, stage, d0)
@@ -426,9 +482,12 @@ def _stage(flags, W, stage, h, dt):
 
 @njit(cache=True, error_model='numpy')
 def _finish(W, h):
-    """New state y + h/6 (k1 + 2 k2 + 2 k3 + k4), the valve's stroke, lumped_kernels._check; commits
-    the robots that pass, flags the ones that fail (their state stays the last good one). Returns the
-    number of robots still active."""
+    """
+    Finish the step: new state y + h/6 (k1 + 2 k2 + 2 k3 + k4), the valve's stroke, the check.
+
+    The check is lumped_kernels._check; commits the robots that pass, flags the ones that fail
+    (their state stays the last good one). Returns the number of robots still active.
+    """
     B = BLOCK
     h6 = h / 6.0
     n_active = 0
@@ -444,7 +503,11 @@ def _finish(W, h):
         stroke = W[R_STROKE * B + j]
         new_valve = v_cmd
         new_valve = valve + stroke if v_cmd > valve + stroke else new_valve
-        new_valve = valve - stroke if (v_cmd < valve - stroke and not v_cmd > valve + stroke) else new_valve
+        new_valve = (
+            valve - stroke
+            if (v_cmd < valve - stroke and not v_cmd > valve + stroke)
+            else new_valve
+        )
         new_valve = new_valve if v_cmd != valve else valve
         finite = finite and math.isfinite(new_valve)
         b = W[R_ACC * B + K.Y_B * B + j]
@@ -472,7 +535,7 @@ def _load_block(W, Y, P, q_cmd, valve_cmd, status, start, n, dt):
     B = BLOCK
     for j in range(B):
         real = start + j < n
-        i = start + j if real else start   # padding lanes: a copy of the block's first robot
+        i = start + j if real else start  # padding lanes: a copy of the block's first robot
         p = P[i]
         for c in range(K.NY):
             W[(R_Y + c) * B + j] = Y[i, c]
@@ -485,7 +548,6 @@ def _load_block(W, Y, P, q_cmd, valve_cmd, status, start, n, dt):
         rho = p[K.P_RHO]
         a = p[K.P_A]
         a_n = p[K.P_A_N]
-        d_n = p[K.P_D_N]
         W[R_RHO * B + j] = rho
         W[R_A * B + j] = a
         W[R_K * B + j] = p[K.P_K]
@@ -531,8 +593,12 @@ def _load_terms(flags, W, P, start, n):
 
 @njit(cache=True, error_model='numpy')
 def _stage_state(W):
-    """The first stage's state is the state; the valve's contraction over the step, and whether the
-    valve seals a moving flow at the step's end (lumped_kernels._advance's valve stroke)."""
+    """
+    Set the first stage's state to the state, and the valve's contraction and sealing flag.
+
+    The valve's contraction over the step, and whether the valve seals a moving flow at the step's
+    end (lumped_kernels._advance's valve stroke).
+    """
     B = BLOCK
     for j in range(B):
         W[R_TU * B + j] = W[(R_Y + K.Y_U) * B + j]
@@ -545,7 +611,11 @@ def _stage_state(W):
         stroke = W[R_STROKE * B + j]
         new_valve = v_cmd
         new_valve = valve + stroke if v_cmd > valve + stroke else new_valve
-        new_valve = valve - stroke if (v_cmd < valve - stroke and not v_cmd > valve + stroke) else new_valve
+        new_valve = (
+            valve - stroke
+            if (v_cmd < valve - stroke and not v_cmd > valve + stroke)
+            else new_valve
+        )
         seal = v_cmd != valve and new_valve <= 0.0 and 0.0 < valve
         W[R_SEAL * B + j] = 1.0 if seal else 0.0
 
@@ -561,8 +631,12 @@ def _n_slow(W):
 
 @njit(cache=True)
 def _slow_steps(flags, W, P, start, n, dt, row):
-    """The robots of the block whose step the vector path does not take: sub-steps, or the valve
-    seals a moving flow; lumped_kernels._advance takes that one step."""
+    """
+    Step the robots of the block whose step the vector path does not take.
+
+    Those need sub-steps, or the valve seals a moving flow; lumped_kernels._advance takes that one
+    step.
+    """
     B = BLOCK
     for j in range(B):
         if start + j >= n or W[R_ACTIVE * B + j] <= 0.0 or W[R_SLOW * B + j] == 0.0:
@@ -585,7 +659,7 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
     B = BLOCK
     W = np.zeros(NROWS * B)
     row = np.empty(K.NY)
-    h = dt / 1                     # lumped_kernels._advance's h = dt / n_sub, n_sub = 1
+    h = dt / 1  # lumped_kernels._advance's h = dt / n_sub, n_sub = 1
     spheroid = _exact_added_mass(flags)
     for start in range(0, n, B):
         if n - start < SCALAR_BELOW:
@@ -624,7 +698,8 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
                 _spheroid(flags, W)
                 _atanh_pass(W, exact)
             _stage(flags, W, 3, h, dt)
-            # robots needing sub-steps or sealing: the single-robot step (their vector step is discarded)
+            # robots needing sub-steps or sealing: the single-robot step (their vector step is
+            # discarded)
             if _n_slow(W) > 0:
                 _slow_steps(flags, W, P, start, n, dt, row)
             n_active = _finish(W, h)
@@ -640,16 +715,35 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
 
 @njit(cache=True)
 def advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exact):
-    """Advance every robot i with status[i] == OK by n_steps fixed steps of dt holding
-    (q_cmd[i], valve_cmd[i]); done[i]: steps it made, status[i]: lumped_kernels.OK or ERR_*.
-    exact: libm's atanh (bit for bit the single-robot runs) instead of the vectorised one."""
+    """
+    Advance every robot i with status[i] == OK by n_steps fixed steps of dt.
+
+    Each robot holds (q_cmd[i], valve_cmd[i]); done[i]: steps it made, status[i]:
+    lumped_kernels.OK or ERR_*. exact: libm's atanh (bit for bit the single-robot runs) instead of
+    the vectorised one.
+    """
     _advance_batch(literally(flags), Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exact)
 
 
 def batch_kernel(flags: int, n_state: int = K.NY):
-    """The compiled entry point of advance_batch for this term set (compiles or loads it once).
-    Called as kernel(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exact)."""
+    """
+    Return the compiled entry point of advance_batch for this term set.
+
+    Compiles or loads it once. Called as
+    kernel(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exact).
+    """
     Y = np.zeros((1, n_state))
     P = np.zeros((1, K.NP))
-    return K.specialised(advance_batch, flags, Y, P, np.zeros(1), np.zeros(1), 0, 1e-4,
-                         np.zeros(1, np.int64), np.zeros(1, np.int64), True)
+    return K.specialised(
+        advance_batch,
+        flags,
+        Y,
+        P,
+        np.zeros(1),
+        np.zeros(1),
+        0,
+        1e-4,
+        np.zeros(1, np.int64),
+        np.zeros(1, np.int64),
+        True,
+    )
