@@ -124,13 +124,13 @@ EXPERIMENTS = {
         "Reading (decided and written into docs/PHYSICS_SHELL.md, \"Experiment E: the authors' code\", with the "
         "code's lines quoted, before any run): the six places where the study's `paper` coupling departs from the "
         'authors\' public code of the same shell (github.com/federicorenda/Unified-Multi-soft-body-Dynamics, '
-        'commit 2cabfe59, `octopus_driver.m`, `octopus_derivatives.m`), adopted together: (1) the pole is '
-        'clamped to the body and the open edge is free in r, z and theta (`sigmas_o = zeros(6,1)` at X = 0, '
+        'commit 2cabfe59, `octopus_driver.m`, `octopus_derivatives.m`), adopted together: (1) the polar cap up to '
+        'the first node whose wall has turned by pi/4 is rigid, part of the body, its rim clamped (first version, the pole node alone, stopped after 5 runs: see the doc) and the open edge is free in r, z and theta (`sigmas_o = zeros(6,1)` at X = 0, '
         'the "buco anteriore"; zero-stress "condizioni su X=L"); (2) a fixed 12.5 mm nozzle, `Area_out = '
         'pi*Rn.^2`, `Area_in = Area_out+3*pi*Rb.^2`; (3) a refilling force `-Cf rho V\'^2/A_in` '
         '(`(Vol_punto>0)*Cf/(Area_in*Aream)`); (4) thrust, refilling force and body drag as a uniform axial '
         'load per reference area on the wall (`fluid = mod_fluid*[senth;costh;0]`, `zetas_e = [0;0;0;fluid]`), '
-        'reaching the vehicle only through the clamped pole (`F_is1r`); no cavity pressure, no tangential '
+        'reaching the vehicle only through the clamped rim (`F_is1r`); no cavity pressure, no tangential '
         'drag on the wall; (5) added mass 1.1 x the shell\'s own mass in r and z (`Gammas_ag = '
         'Gammas+ro_shel*B*diag([0 0 0 2*h 2*h 2*h])`); (6) the shell\'s inertia sees the vehicle\'s '
         'acceleration (`- sigmar_bar_punto`), the vehicle solved with the shell. Every study value stays (the '

@@ -178,19 +178,22 @@ def test_fixed_nozzle_with_a_free_edge_keeps_the_exit_area():
 
 def test_paper_code_clamps_the_pole_and_frees_the_edge():
     """Experiment E, `coupling: paper_code` (the authors' code, docs/PHYSICS_SHELL.md "Experiment E"):
-    the body holds the pole (sigmas_o = zeros(6,1) at X = 0), the open edge carries no wrench and moves
-    in r, z and theta; thrust, refill force and drag ride on the wall and reach the vehicle through
-    the pole; the ledger names what the scheme creates and closes."""
+    the body holds the polar cap up to the rim of the code's pi/4 hole (sigmas_o = zeros(6,1) at X = 0),
+    the open edge carries no wrench and moves in r, z and theta; thrust, refill force and drag ride on
+    the wall and reach the vehicle through the rim; the ledger names what the scheme creates and closes."""
     jet = dict(outlet='free_edge_fixed_nozzle', outlet_radius_m=0.0125, thrust_coefficient=1.0)
     model = ShellModel.from_scene(cone_scene('paper_code', jet=jet))
     nd = model.Nd
-    assert nd[0, sk.N_FIXR] == nd[0, sk.N_FIXZ] == nd[0, sk.N_FIXT] == 1.0          # pole clamped
+    k = model.code_rim               # the rim of the code's pi/4 hole: the wall has turned by pi/4 there
+    assert 0 < k < model.n_nodes // 4 and abs(model.ref.theta0[k]) >= math.pi / 4 > abs(model.ref.theta0[k - 1])
+    assert np.all(nd[:k + 1, [sk.N_FIXR, sk.N_FIXZ, sk.N_FIXT]] == 1.0)            # polar cap and rim clamped
+    assert np.all(nd[k + 1:, sk.N_FIXZ] == 0.0) and not np.any(nd[:k + 1, sk.N_WC])   # cable on the wall only
     assert nd[-1, sk.N_FIXR] == nd[-1, sk.N_FIXZ] == nd[-1, sk.N_FIXT] == 0.0       # edge free
     assert np.allclose(nd[:, sk.N_MRR], 2.1 * model.node_mass)                      # 1.1 x own mass, r and z
     assert np.allclose(nd[:, sk.N_MZZ], 2.1 * model.node_mass) and not np.any(nd[:, sk.N_MRZ])
     state = run(model, 0.15)
     r, z = model.profile(state)
-    assert z[0] == model.ref.z0[0] and r[0] == 0.0                # the pole stays where the body holds it
+    assert np.array_equal(z[:k + 1], model.ref.z0[:k + 1]) and np.array_equal(r[:k + 1], model.ref.r0[:k + 1])
     assert abs(z[-1] - model.ref.z0[-1]) > 1e-6                   # the edge moves along the axis ...
     assert r[-1] < 0.99 * 0.03                                    # ... and radially
     tail = 6 * model.n_nodes

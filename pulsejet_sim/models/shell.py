@@ -49,6 +49,13 @@ default), ``edge`` (the paper default: the mantle's free edge is the nozzle, rad
 at that edge, ``A_out = pi r_edge(t)^2``) or ``free_edge_fixed_nozzle`` (the edge free as with ``edge``,
 but the jet leaves through a fixed nozzle of ``outlet_radius_m``, ``A_out = pi r_n^2``: the authors'
 later code, ``Area_out = pi*Rn.^2`` with ``Rn = 12.5e-3``, whose exit area does not follow the shell).
+``paper_code`` (experiment E, the authors' public code as written; citations in docs/PHYSICS_SHELL.md,
+"Experiment E"): the pole is clamped to the body and the edge is free in r, z and theta; fixed nozzle
+(``free_edge_fixed_nozzle``, default radius 12.5 mm); no cavity pressure and no tangential drag on the
+wall; thrust, a refilling force ``-C_f rho V'^2/A_in`` and the body drag act on the wall as a uniform
+axial load per reference area and reach the vehicle through the pole's reaction; added mass ``C_a``
+times the node's own mass in r and z; the consistent coupling's frame (the shell's inertia sees the
+vehicle's acceleration).  Its ledger books ``created_unpaid_jet_kinetic`` and ``created_wall_loads``.
 
 *Energy ledger.*  Stored: elastic, shell + payload kinetic ("vehicle"), added-mass kinetic
 ("outer fluid"), ``1/2 rho V U^2`` ("internal").  In: actuation work (cable force times wall
@@ -80,7 +87,7 @@ retried as 4, 16, 64 sub-steps before SimulationBlowUp is raised.
 
 Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated)::
 
-    coupling:   consistent | paper
+    coupling:   consistent | paper | paper_code
     simulation: {dt_s, duration_s, integrator: implicit_midpoint|backward_euler|verlet,
                  newton_tolerance: 1e-9, specialise_kernel: false}
     geometry:   {kind: ellipsoid, semi_axis_axial_m, semi_axis_radial_m, opening_radius_m}
@@ -132,7 +139,7 @@ SECTIONS = ('model', 'name', 'description', 'coupling', 'simulation', 'geometry'
 TERMS = {'viscosity': True, 'drag': True, 'added_mass': True, 'jet': True, 'vehicle_motion': True}
 ACTUATION_KINDS = ('none', 'cable', 'muscle')
 DISTRIBUTIONS = ('uniform', 'rising', 'falling')
-COUPLINGS = ('consistent', 'paper')
+COUPLINGS = ('consistent', 'paper', 'paper_code')
 OUTLETS = ('ring', 'edge', 'free_edge_fixed_nozzle')
 DESIRED_RADIUS = ('proportional', 'constant_depth', 'constant_depth_to_edge')
 ERR_TEXT = {
@@ -222,6 +229,8 @@ class ShellModel:
     """Axisymmetric Reissner shell mantle + jet + vehicle (implements the Model protocol)."""
 
     name = 'shell'
+    code_rim = 0            # paper_code: the node of the clamped rim around the pole
+    isotropic_added_mass = False
 
     def __init__(self, *, profile: Profile, dt_s: float, integrator: str, flags: int, P: np.ndarray,
                  E: np.ndarray, Nd: np.ndarray, node_mass: np.ndarray, node_added_mass: np.ndarray,
@@ -271,11 +280,12 @@ class ShellModel:
         if coupling not in COUPLINGS:
             raise ModelError(f'coupling: {coupling!r} is not known; allowed: one of {", ".join(COUPLINGS)}')
         paper = coupling == 'paper'
+        code = coupling == 'paper_code'
         sim = _section(scene, 'simulation')
         dt = _num(sim, 'dt_s', 'simulation', 0.0, 0.1, low_open=True)
         integrator = _choice(sim, 'integrator', 'simulation', tuple(INTEGRATORS), 'implicit_midpoint')
-        if paper and integrator == 'verlet':
-            raise ModelError("simulation.integrator: 'verlet' is not available with coupling: paper; allowed: "
+        if (paper or code) and integrator == 'verlet':
+            raise ModelError(f"simulation.integrator: 'verlet' is not available with coupling: {coupling}; allowed: "
                              "implicit_midpoint or backward_euler")
         duration = _num(sim, 'duration_s', 'simulation', 0.0, 1e6, default=10.0)
         tol = _num(sim, 'newton_tolerance', 'simulation', 1e-14, 1e-4, default=1e-9)
@@ -327,15 +337,19 @@ class ShellModel:
 
         jet = _section(scene, 'jet', required=terms['jet'])
         _unknown(jet, 'jet', ('outlet', 'outlet_radius_m', 'inlet_area_m2', 'thrust_coefficient'))
-        outlet = _choice(jet, 'outlet', 'jet', OUTLETS, 'edge' if paper else 'ring')
+        outlet = _choice(jet, 'outlet', 'jet', OUTLETS, 'free_edge_fixed_nozzle' if code else 'edge' if paper else 'ring')
         rring = profile.ring_radius_m
+        if code and outlet != 'free_edge_fixed_nozzle':
+            raise ModelError(f'jet.outlet: {outlet!r} is not available with coupling: paper_code (the authors\' code: '
+                             f'free open end, fixed nozzle Area_out = pi*Rn.^2); allowed: free_edge_fixed_nozzle')
         if outlet == 'edge':
             if 'outlet_radius_m' in jet:
                 raise ModelError(f'jet.outlet_radius_m: {jet["outlet_radius_m"]!r} is not used with outlet: edge '
                                  f'(the outlet is the mantle edge, radius {rring:.4g} m at rest); allowed: leave it '
                                  f'out, or outlet: ring')
         free_edge = outlet in ('edge', 'free_edge_fixed_nozzle')
-        r_out = rring if outlet == 'edge' else _num(jet, 'outlet_radius_m', 'jet', 1e-4, rring, default=0.5 * rring)
+        r_out = rring if outlet == 'edge' else _num(jet, 'outlet_radius_m', 'jet', 1e-4, rring,
+                                                    default=min(0.0125, rring) if code else 0.5 * rring)
         A_out = math.pi * r_out ** 2
         A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01 ** 2)
         Cf = _num(jet, 'thrust_coefficient', 'jet', 0.0, 2.0, default=1.0)
@@ -385,6 +399,13 @@ class ShellModel:
         Nd[:, sk.N_MRR] = m + ma * n0[:, 0] ** 2
         Nd[:, sk.N_MRZ] = ma * n0[:, 0] * n0[:, 1]
         Nd[:, sk.N_MZZ] = m + ma * n0[:, 1] ** 2
+        if code:
+            # the authors' code: C_a times the shell's own mass, in every translation
+            # (octopus_driver.m: Gammas_ag = Gammas+ro_shel*B*diag([0 0 0 2*h 2*h 2*h]), B = 1.1)
+            ma = Ca * m if terms['added_mass'] else np.zeros(n1)
+            Nd[:, sk.N_MRR] = m + ma
+            Nd[:, sk.N_MRZ] = 0.0
+            Nd[:, sk.N_MZZ] = m + ma
         Nd[:, sk.N_MTT] = rot * m * h * h / 3.0
         Nd[:, sk.N_DAREA] = area
         # axis contact radius: one half-thickness (inner faces meet), but never more than half the
@@ -404,6 +425,20 @@ class ShellModel:
             Nd[-1, sk.N_MRZ] = 0.0
             free[-1] = True
         shell_free_mass = float(m[:-1].sum())
+        code_rim = 0
+        if code:
+            # the authors' code (octopus_driver.m, octopus_derivatives.m): the body holds X = 0, a hole whose
+            # wall is at alpha0 = pi/4 (sigmas_o = zeros(6,1)); the open end X = L carries no wrench
+            # ("condizioni su X=L"). Here the polar cap up to the first node whose wall is at pi/4 from
+            # the pole's is rigid, part of the body, its rim clamped; the edge is free in r, z and theta
+            code_rim = int(np.argmax(np.abs(th0 - th0[0]) >= math.pi / 4 - 1e-12))
+            if code_rim <= 0 or code_rim >= ne - 1:
+                raise ModelError(f'coupling: paper_code needs a mantle whose wall turns by pi/4 from the pole '
+                                 f'before the edge (the clamped rim of the authors\' code); this geometry does not')
+            Nd[:code_rim + 1, sk.N_FIXR] = Nd[:code_rim + 1, sk.N_FIXZ] = Nd[:code_rim + 1, sk.N_FIXT] = 1.0
+            Nd[-1, sk.N_FIXZ] = 0.0
+            free[:code_rim + 1] = False
+            shell_free_mass = float(m[code_rim + 1:].sum())
 
         # ---- vehicle
         total = _num(veh, 'mass_kg', 'vehicle', 1e-6, 1e6, default=2.0 * shell_free_mass)
@@ -420,6 +455,8 @@ class ShellModel:
             flags |= sk.F_PAPER
         if outlet == 'edge':
             flags |= sk.F_EDGE
+        if code:
+            flags |= sk.F_CODE
         if terms['viscosity'] and eta_v > 0:
             flags |= sk.F_VISC
         if terms['drag']:
@@ -519,6 +556,10 @@ class ShellModel:
         model.specialise_kernel = spec
         model.coupling = coupling
         model.outlet = outlet
+        model.isotropic_added_mass = code
+        model.code_rim = code_rim
+        if code:
+            model._initial_energy = model._stored(model.initial_state())[0]
         model.material = dict(youngs_modulus_pa=Ey, viscosity_pa_s=eta_v, poisson_ratio=nu, half_thickness_m=h,
                               density_kg_m3=rho_s)
         # ---- refuse what cannot run
@@ -556,7 +597,9 @@ class ShellModel:
         U0 = self.initial_velocity_m_s if self.flags & sk.F_BODY else 0.0
         s[tail + sk.S_U] = U0
         v = s[3 * n1:6 * n1].reshape(n1, 3)
-        if not self.flags & sk.F_PAPER:
+        if self.flags & sk.F_CODE:
+            v[self.code_rim + 1:, 1] = U0   # the polar cap is the body's; the wall moves with the vehicle
+        elif not self.flags & sk.F_PAPER:
             v[1:-1, 1] = U0   # wall moving with the vehicle (absolute axial velocity)
             v[0, 1] = U0
         s[tail + sk.S_VOL] = self.ref.volume_m3()
@@ -701,8 +744,11 @@ class ShellModel:
         U = float(state[6 * n1 + sk.S_U])
         k_own = 0.5 * float(np.sum(self.node_mass * (v[:, 0] ** 2 + v[:, 1] ** 2)
                                    + self.Nd[:, sk.N_MTT] * v[:, 2] ** 2))
-        vn = v[:, 0] * self.n0[:, 0] + v[:, 1] * self.n0[:, 1]
-        k_am = 0.5 * float(np.sum(self.node_added_mass * vn ** 2))
+        if getattr(self, 'isotropic_added_mass', False):
+            k_am = 0.5 * float(np.sum(self.node_added_mass * (v[:, 0] ** 2 + v[:, 1] ** 2)))
+        else:
+            vn = v[:, 0] * self.n0[:, 0] + v[:, 1] * self.n0[:, 1]
+            k_am = 0.5 * float(np.sum(self.node_added_mass * vn ** 2))
         k_veh = 0.5 * self.payload_kg * U * U + k_own
         if self.flags & sk.F_PAPER:
             # node velocities are relative to the body: the vehicle carries the shell's own mass
@@ -725,6 +771,12 @@ class ShellModel:
         if self.flags & sk.F_PAPER:
             # not an input: the energy the paper's equations create, named (docs/PHYSICS_SHELL.md)
             created = led['created_unpaid_jet_kinetic'] = float(T[sk.S_CREATED])
+        elif self.flags & sk.F_CODE:
+            # experiment E (docs/PHYSICS_SHELL.md): the unpaid jet, and the work of the wall-borne thrust,
+            # refill force and drag beyond what the books charge at the vehicle's speed
+            led['created_unpaid_jet_kinetic'] = float(T[sk.S_CREATED])
+            led['created_wall_loads'] = float(T[sk.S_CREATED_WALL])
+            created = led['created_unpaid_jet_kinetic'] + led['created_wall_loads']
         err = tot - led['in_initial'] - led['in_actuation_work'] + out - created
         led['closure_error'] = float(err)
         led['closure_relative'] = float(err / max(led['in_initial'] + led['in_actuation_work'], 1e-300))

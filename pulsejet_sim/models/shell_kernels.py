@@ -54,6 +54,11 @@ F_ROUTINE = 64
 F_PAPER = 128
 # the outlet is the mantle's own free edge: A_out(t) = pi r_edge(t)^2 (paper 000 section 5)
 F_EDGE = 256
+# the authors' code as written (experiment E, coupling paper_code; docs/PHYSICS_SHELL.md "Experiment E"):
+# pole clamped to the body, edge free, fixed nozzle, no cavity pressure and no tangential drag on the
+# wall; thrust, refilling force and body drag loaded on the wall as a uniform axial load per reference
+# area; the vehicle (consistent frame, monolithic) feels them through the clamped pole's axial reaction
+F_CODE = 512
 
 # ---- parameter vector P ---------------------------------------------------------------------
 P_PSI, P_PSI2, P_JS, P_GS, P_GV, P_NU = 0, 1, 2, 3, 4, 5
@@ -80,12 +85,15 @@ S_X, S_U, S_A, S_IN, S_JET, S_DRAG, S_VISC, S_OTHER = 0, 1, 2, 3, 4, 5, 6, 7
 S_THR, S_BDRAG, S_UJ, S_P, S_VOL, S_VDOT, S_TIME = 8, 9, 10, 11, 12, 13, 14
 S_NIT, S_NJAC = 15, 16   # cumulative Newton iterations and Jacobian factorisations (diagnostics)
 S_CREATED = 17           # paper coupling: the jet's kinetic energy that no wall force pays for, J
-N_TAIL = 18
+S_CREATED_WALL = 18      # paper_code: work of the wall-borne thrust, refill force and drag beyond the books, J
+N_TAIL = 19
 
 # ---- stats returned by the force evaluation -------------------------------------------------
 T_EEL, T_PVISC, T_PDRAG, T_VOL, T_VDOT, T_P, T_PACT, T_FRING, T_RMAX, T_PCONT = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 T_AOUT = 10   # outlet area, m^2
-N_STATS = 11
+T_WREL = 11   # paper_code: area-weighted mean axial wall velocity relative to the body, m/s
+T_FREF = 12   # paper_code: the refilling force (<= 0), N
+N_STATS = 13
 
 # blow-up codes
 OK, ERR_NONFINITE, ERR_AXIS, ERR_BOUNDS, ERR_NEWTON = 0, 1, 2, 3, 4
@@ -266,6 +274,16 @@ def jet_terms(Vdot, U, P, A_out):
 
 
 @njit(cache=True)
+def code_rim(Nd):
+    """paper_code: the node of the clamped rim (the last node held axially by the body)."""
+    kc = 0
+    for i in range(Nd.shape[0]):
+        if Nd[i, N_FIXZ] > 0.5:
+            kc = i
+    return kc
+
+
+@njit(cache=True)
 def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
     """All generalised forces on the shell dofs at (q, v, U, t), into F (including the reactions
     on constrained dofs). Fills st (stats), gV (volume gradient), vrel (velocities rel. body)."""
@@ -333,7 +351,7 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
             pact += f * vrel[3 * i]
     # tangential quadratic drag relative to the water (absolute velocity)
     pdrag = 0.0
-    if flags & F_DRAG:
+    if (flags & F_DRAG) and not (flags & F_CODE):
         cdr = 0.5 * P[P_RHO] * P[P_CT]
         for i in range(n1):
             if Nd[i, N_FIXZ] > 0.5:
@@ -353,8 +371,33 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
         Vdot += gV[k] * vrel[k]
     p = 0.0
     aout = outlet_area(flags, q, n1, P)
-    if (flags & F_JET) and not (flags & F_PAPER):
+    if (flags & F_JET) and not (flags & F_PAPER) and not (flags & F_CODE):
         p, uj, thr, ram, pj, po = jet_terms(Vdot, U, P, aout)
+    wrel = 0.0
+    fref = 0.0
+    if flags & F_CODE:
+        # the authors' code: (thrust + refill force + body drag) per unit reference area, axial, on
+        # every node (octopus_derivatives.m: fluid = mod_fluid*[senth;costh;0], zetas_e = [0;0;0;fluid])
+        kc = code_rim(Nd)
+        aw = 0.0
+        rmx = 0.0
+        for i in range(kc, n1):
+            aw += Nd[i, N_DAREA]
+        for i in range(n1):
+            if q[3 * i] > rmx:
+                rmx = q[3 * i]
+        load = 0.0
+        if flags & F_JET:
+            p_, uj_, thr_, ram_, pj_, po_ = jet_terms(Vdot, U, P, aout)
+            if Vdot > 0.0:
+                fref = -P[P_CF] * P[P_RHO] * Vdot * Vdot / P[P_AIN]
+            load = thr_ + fref
+        if flags & F_DRAG:
+            load -= 0.5 * P[P_CD] * P[P_RHO] * math.pi * rmx * rmx * abs(U) * U
+        for i in range(kc, n1):
+            wi = Nd[i, N_DAREA] / aw
+            F[3 * i + 1] += wi * load
+            wrel += wi * vrel[3 * i + 1]
     pst = P[P_PSTAT]
     if pst != 0.0:
         # static load: potential -p_s V, its work p_s V' is booked as input
@@ -374,9 +417,13 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
     st[T_P] = p
     st[T_PACT] = pact
     st[T_FRING] = F[3 * (n1 - 1) + 1]
+    if flags & F_CODE:
+        st[T_FRING] = F[3 * code_rim(Nd) + 1]      # the body holds the rim around the pole
     st[T_RMAX] = rmax
     st[T_PCONT] = pcont
     st[T_AOUT] = aout
+    st[T_WREL] = wrel
+    st[T_FREF] = fref
 
 
 @njit(cache=True)
@@ -401,6 +448,9 @@ def body_terms(flags, st, U, P):
     acc = 0.0
     if flags & F_PAPER:
         acc = (thr + drag - ram) / m
+    elif flags & F_CODE:
+        if flags & F_BODY:
+            acc = (-ram + st[T_FRING]) / m   # thrust and drag reach the body through the clamped pole
     elif flags & F_BODY:
         acc = (thr + drag - ram + st[T_FRING]) / m
     return acc, thr, drag, ram, pj, po, m
@@ -554,7 +604,7 @@ def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
             f, en, kk = contact(q[3 * i], Nd[i, N_HC], P[P_KC] * Nd[i, N_DAREA])
             K[3 * i, BW] -= kk
             C[3 * i, BW] -= 2.0 * math.sqrt(kk * Nd[i, N_MRR])
-    if flags & F_DRAG:
+    if (flags & F_DRAG) and not (flags & F_CODE):
         cdr = 0.5 * P[P_RHO] * P[P_CT]
         for i in range(n1):
             if Nd[i, N_FIXZ] > 0.5:
@@ -632,6 +682,14 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     alpha = P[P_ALPHA]
     maxit = int(P[P_MAXIT])
     vprev = np.empty(n)
+    wz = np.zeros(n)     # paper_code: the axial load's weights (area shares), rank-one Jacobian term
+    if flags & F_CODE:
+        kc = code_rim(Nd)
+        aw = 0.0
+        for i in range(kc, n1):
+            aw += Nd[i, N_DAREA]
+        for i in range(kc, n1):
+            wz[3 * i + 1] = Nd[i, N_DAREA] / aw
     have_lu = False      # the factorised Newton matrix is reused across steps (modified Newton)
     for step in range(n_steps):
         t = time0 + step * dt
@@ -681,6 +739,8 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             # monolithic vehicle only in the consistent coupling (the paper's is solved after the shell)
             body = (flags & F_BODY) != 0 and (flags & F_PAPER) == 0
             rz = 3 * (n1 - 1) + 1
+            if flags & F_CODE:
+                rz = 3 * code_rim(Nd) + 1          # the clamped rim's axial slot carries the vehicle
             Us = U + alpha * dt * state[tail + S_A]
             if not body:
                 Us = 0.0
@@ -720,7 +780,10 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         gf[k] = gV[k]
                 if body:
                     ab_, thr_, dr_b, ram_, pj_, po_, mb_ = body_terms(flags, st, Us, P)
-                    R[rz] = mb_ * (Us - U) / alpha - dt * (thr_ + dr_b - ram_ + st[T_FRING])
+                    if flags & F_CODE:
+                        R[rz] = mb_ * (Us - U) / alpha - dt * (-ram_ + st[T_FRING])
+                    else:
+                        R[rz] = mb_ * (Us - U) / alpha - dt * (thr_ + dr_b - ram_ + st[T_FRING])
                 state[tail + S_NIT] += 1.0
                 # backtracking line search on |R|: halve a Newton step that increased the residual
                 rnorm = 0.0
@@ -737,7 +800,12 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     have_lu = False     # even short steps fail: the Jacobian is stale
                 rprev = rnorm
                 lam = 1.0
-                if have_lu and (flags & F_JET) and not (flags & F_PAPER):
+                if have_lu and (flags & F_JET) and (flags & F_CODE):
+                    # rank one of the wall-borne thrust / refill force: dF = w (dT/dV') g^T
+                    Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
+                    pcoef = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
+                    band_solve(J, n, BW, wz, zz)
+                elif have_lu and (flags & F_JET) and not (flags & F_PAPER):
                     # refresh the rank-one pressure correction for the reused factorisation
                     Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
                     pcoef = dt * P[P_RHO] * abs(st[T_VDOT]) / (Aj * Aj)
@@ -755,7 +823,13 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         J[3 * i + 1, BW - 1] += Nd[i, N_MRZ] / alpha
                         J[3 * i + 1, BW] += Nd[i, N_MZZ] / alpha
                         J[3 * i + 2, BW] += Nd[i, N_MTT] / alpha
-                    if body:
+                    if body and (flags & F_CODE):
+                        # the pole slot carries the vehicle: its mass and the d/dU of ram (the drag's
+                        # d/dU acts on every wall node: left to the Newton iteration)
+                        J[rz, BW] += (mb_ - Nd[(rz - 1) // 3, N_MZZ]) / alpha
+                        if flags & F_JET:
+                            J[rz, BW] += dt * P[P_RHO] * max(st[T_VDOT], 0.0)
+                    elif body:
                         # the ring slot carries the vehicle: its mass and the d/dU of drag and ram
                         J[rz, BW] += (mb_ - Nd[n1 - 1, N_MZZ]) / alpha
                         if flags & F_DRAG:
@@ -774,7 +848,11 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         return step, ERR_NEWTON
                     # pressure rank one: + dt rho |V'|/A^2 g g^T
                     pcoef = 0.0
-                    if (flags & F_JET) and not (flags & F_PAPER):
+                    if (flags & F_JET) and (flags & F_CODE):
+                        Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
+                        pcoef = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
+                        band_solve(J, n, BW, wz, zz)
+                    elif (flags & F_JET) and not (flags & F_PAPER):
                         Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
                         pcoef = dt * P[P_RHO] * abs(st[T_VDOT]) / (Aj * Aj)
                         band_solve(J, n, BW, gf, zz)
@@ -833,6 +911,17 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     po -= 0.5 * P[P_RHO] * P[P_AIN] * uin_ * uin_ * uin_
             else:
                 acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
+                if flags & F_CODE:
+                    # as in the paper coupling no cavity pressure pays for the jet; and the thrust, the
+                    # refill force and the drag work at the wall's speed, not the vehicle's
+                    # (docs/PHYSICS_SHELL.md, "Experiment E")
+                    if (flags & F_JET) and st[T_VDOT] < 0.0:
+                        uj_ = -st[T_VDOT] / st[T_AOUT]
+                        state[tail + S_CREATED] += dt * 0.5 * P[P_RHO] * st[T_AOUT] * uj_ * uj_ * uj_
+                    elif flags & F_JET:
+                        uin_ = st[T_VDOT] / P[P_AIN]
+                        po -= 0.5 * P[P_RHO] * P[P_AIN] * uin_ * uin_ * uin_
+                    state[tail + S_CREATED_WALL] += dt * ((thr + dr) * st[T_WREL] + st[T_FREF] * (Us + st[T_WREL]))
             for i in range(n1):
                 q1[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
                 q1[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Ush) * (1.0 - Nd[i, N_FIXZ])
