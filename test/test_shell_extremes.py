@@ -195,3 +195,38 @@ def test_random_scenes_never_produce_nan():
             outcomes.append('blowup')
         assert np.all(np.isfinite(state))
     assert outcomes.count('ok') >= 4, outcomes
+
+
+CABLE_SCENES = sorted(
+    p.stem
+    for p in CONFIG.glob('*.yaml')
+    if (yaml.safe_load(p.read_text()).get('actuation') or {}).get('kind') == 'cable'
+)
+
+
+@pytest.mark.parametrize('name', CABLE_SCENES)
+def test_cable_commands_up_to_the_rating_never_blow_a_shipped_scene_up(name):
+    """Hold, and toggle every step and every 10 steps, at the cable's rating: the physics runs."""
+    from pulsejet_sim.models.base import CommandError
+    from pulsejet_sim.scene import load_scene
+    from pulsejet_sim.simulation import Simulation
+
+    model = load_scene(name, command_driven=True).model
+    low, rating = Simulation(model).command_limits['cable_force_n']
+    assert 0.0 < rating < Command.LIMITS['cable_force_n'][1]
+    patterns = {
+        'hold': lambda k: 1,
+        'toggle every step': lambda k: k % 2,
+        'toggle every 10 steps': lambda k: (k // 10) % 2,
+    }
+    for pattern, on in patterns.items():
+        sim = Simulation(model)
+        for k in range(int(round(1.0 / model.dt_s))):
+            try:
+                obs = sim.step(1, Command(cable_force_n=rating * on(k)))
+            except SimulationBlowUp as err:
+                pytest.fail(f'{name}, {pattern} at the {rating:g} N rating: {err}')
+        assert math.isfinite(obs.velocity_m_s) and math.isfinite(obs.volume_m3)
+    # above the rating the command is refused, naming the value and the scene's range
+    with pytest.raises(CommandError, match=rf'cable_force_n=.*\[0\.0, {rating:g}'):
+        Simulation(model).step(1, Command(cable_force_n=1.01 * rating))

@@ -108,7 +108,12 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
                  hoop radius, 0..0.95), distribution: uniform|rising|falling (cable),
                  taper_fraction: 0.15, desired_radius: proportional|constant_depth|
                  constant_depth_to_edge (muscle),
-                 frequency_hz, contraction_s, release_s, start_delay_s}
+                 frequency_hz, contraction_s, release_s, start_delay_s,
+                 max_cable_force_n (cable): the cable actuator's rating, N; a command above it is
+                 refused (CommandError). Default twice the amplitude when the scene gives one: the
+                 wall has no contact model, so a pull that folds the mantle onto itself (about
+                 3x the robot's 8 N) stops the physics; the rating keeps commands below that, and
+                 test/test_shell_extremes.py holds every shipped cable scene at it}
     terms:      {viscosity, drag, added_mass, jet, vehicle_motion: all true}
     load:       {internal_pressure_pa: 0}   (static pressure load, for tests)
     initial:    {radial_perturbation_m: 0}  (r += d sin(pi X/L) at t = 0)
@@ -251,6 +256,10 @@ class ShellModel:
         self.payload_kg = payload_kg
         self.body_added_mass_kg = body_added_mass_kg
         self.actuation = actuation
+        #: the actuators' ranges (Simulation.command_limits): the cable's rating
+        self.command_limits = dict(Command.LIMITS)
+        if 'max_cable_force_n' in actuation:
+            self.command_limits['cable_force_n'] = (0.0, float(actuation['max_cable_force_n']))
         self.initial_perturbation_m = initial_perturbation_m
         self.initial_velocity_m_s = initial_velocity_m_s
         self.duration_s = duration_s
@@ -470,7 +479,8 @@ class ShellModel:
         actuation = {'kind': akind, 'source': 'none'}
         if akind != 'none':
             common = ('kind', 'source', 'amplitude', 'frequency_hz', 'contraction_s', 'release_s', 'start_delay_s')
-            extra = ('distribution',) if akind == 'cable' else ('taper_fraction', 'desired_radius')
+            extra = (('distribution', 'max_cable_force_n') if akind == 'cable'
+                     else ('taper_fraction', 'desired_radius'))
             _unknown(act, 'actuation', common + extra)
             src = _choice(act, 'source', 'actuation', ('routine', 'command') if akind == 'cable' else ('routine',),
                           'routine')
@@ -489,8 +499,12 @@ class ShellModel:
                     raise ModelError(f'actuation.distribution: {dist!r} loads no free node; allowed: uniform')
                 Nd[:, sk.N_WC] = w / w.sum()
                 actuation['distribution'] = dist
-                if src == 'routine':
-                    amp = _num(act, 'amplitude', 'actuation', 0.0, 1000.0)
+                force_high = Command.LIMITS['cable_force_n'][1]
+                if src == 'routine' or 'amplitude' in act:   # a command-driven scene keeps its routine's
+                    amp = _num(act, 'amplitude', 'actuation', 0.0, force_high)
+                actuation['max_cable_force_n'] = _num(act, 'max_cable_force_n', 'actuation', 0.0, force_high,
+                                                      default=2.0 * amp if amp > 0 else force_high,
+                                                      low_open=True)
             else:
                 flags |= sk.F_MUSCLE
                 amp = _num(act, 'amplitude', 'actuation', 0.0, 0.95)

@@ -100,7 +100,7 @@ OK, ERR_NONFINITE, ERR_AXIS, ERR_BOUNDS, ERR_NEWTON = 0, 1, 2, 3, 4
 BW = 5  # half bandwidth of the dof ordering
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def routine(t, P):
     """Activation a(t) in [0, 1] and da/dt of the periodic routine: half-cosine rise over the
     contraction time, half-cosine fall over the release time, rest for the remaining period."""
@@ -120,7 +120,7 @@ def routine(t, P):
     return 0.0, 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def contact(r, hc, k):
     """Axis contact barrier for r < hc: force f = k hc (hc/r - 1) (outward), energy
     k hc (hc ln(hc/r) - (hc - r)), stiffness df/dr = -k hc^2/r^2; below r = hc/10 it continues
@@ -136,7 +136,7 @@ def contact(r, hc, k):
     return f1 + s1 * d, e1 + f1 * d + 0.5 * s1 * d * d, s1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def element_strain(q6, ds, r0m, lam0, eta0, k0, vs0, taud, B):
     """Strains (e11, e22, gamma, d11, d22) of one element and their gradient B (5 x 6)."""
     r1, z1, t1, r2, z2, t2 = q6[0], q6[1], q6[2], q6[3], q6[4], q6[5]
@@ -175,7 +175,7 @@ def element_strain(q6, ds, r0m, lam0, eta0, k0, vs0, taud, B):
     return e11, e22, gam, d11, d22
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
     """Elastic + viscous generalised force on the 6 element dofs (into f6, overwritten).
 
@@ -220,7 +220,7 @@ def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
     return energy
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def volume_grad(q, n1, g):
     """Cavity volume between the shell and the ring plane, V = sum of frusta
     pi/3 (r_i^2 + r_i r_j + r_j^2)(z_i - z_j), and its gradient g (dofs 3i, 3i+1)."""
@@ -240,7 +240,7 @@ def volume_grad(q, n1, g):
     return V
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def outlet_area(flags, q, n1, P):
     """Outlet area, m^2: the fixed ``A_out``, or pi r_edge^2 when the free edge is the nozzle."""
     if flags & F_EDGE:
@@ -249,7 +249,7 @@ def outlet_area(flags, q, n1, P):
     return P[P_AOUT]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def jet_terms(Vdot, U, P, A_out):
     """Jet model: returns (p, u_j, thrust, ram, P_jet_out, P_other).
 
@@ -273,7 +273,7 @@ def jet_terms(Vdot, U, P, A_out):
     return p, -u, 0.0, ram, 0.0, 0.5 * rho * A * u * u * u + 0.5 * rho * Vdot * U * U
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def code_rim(Nd):
     """paper_code: the node of the clamped rim (the last node held axially by the body)."""
     kc = 0
@@ -283,7 +283,7 @@ def code_rim(Nd):
     return kc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
     """All generalised forces on the shell dofs at (q, v, U, t), into F (including the reactions
     on constrained dofs). Fills st (stats), gV (volume gradient), vrel (velocities rel. body)."""
@@ -426,7 +426,7 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
     st[T_FREF] = fref
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def body_terms(flags, st, U, P):
     """Vehicle: returns (accel, thrust, body drag (signed, opposes U), ram, P_jet_out, P_other, m).
 
@@ -456,7 +456,7 @@ def body_terms(flags, st, U, P):
     return acc, thr, drag, ram, pj, po, m
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def apply_minv(Nd, F, out):
     """out = M^-1 F on free dofs (2x2 node blocks for (r, w), scalar for theta), 0 on fixed."""
     n1 = Nd.shape[0]
@@ -477,7 +477,7 @@ def apply_minv(Nd, F, out):
         out[3 * i + 2] = 0.0 if Nd[i, N_FIXT] > 0.5 else F[3 * i + 2] / Nd[i, N_MTT]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def kinetic(Nd, v, U, P, V, flags):
     """(shell kinetic incl. rotation, normal added-mass kinetic [included in the node mass blocks],
     vehicle 1/2 M U^2, internal fluid 1/2 rho V U^2).  The node blocks are
@@ -503,7 +503,7 @@ def kinetic(Nd, v, U, P, V, flags):
 # ---------------------------------------------------------------------------------------------
 # banded linear algebra (no pivoting: the Newton matrix M/alpha - dt(alpha dt K + C) is
 # dominated by its positive mass and stiffness diagonal)
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def band_lu(A, n, bw):
     for k in range(n):
         piv = A[k, bw]
@@ -519,7 +519,7 @@ def band_lu(A, n, bw):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def band_solve(A, n, bw, b, x):
     for i in range(n):
         s = b[i]
@@ -533,7 +533,7 @@ def band_solve(A, n, bw, b, x):
         x[i] = s / A[i, bw]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fixed_dof(Nd, k):
     i = k // 3
     c = k - 3 * i
@@ -544,7 +544,7 @@ def fixed_dof(Nd, k):
     return Nd[i, N_FIXT] > 0.5
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
     """Banded stiffness K = dF/dq (forward differences of the element forces, incl. the
     geometric part) and damping C = dF/dv (exact viscous -B^T D_v B, drag 2x2 blocks).
@@ -620,7 +620,7 @@ def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
             C[3 * i + 1, BW] += k * s * s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _check(q, v, n1, P):
     for k in range(6 * n1):
         if not math.isfinite(q[k] if k < 3 * n1 else v[k - 3 * n1]):
@@ -636,7 +636,7 @@ def _check(q, v, n1, P):
     return OK
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _paper_vehicle_midpoint(flags, st, U, alpha, dt, P):
     """Paper coupling: the vehicle's midpoint speed U* of m (U* - U)/alpha = dt (T - D(U*) - ram(U*)),
     with the thrust T of the shell's midpoint state (the shell does not feel U); scalar Newton."""
@@ -656,7 +656,7 @@ def _paper_vehicle_midpoint(flags, st, U, alpha, dt, P):
     return Us
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     n1 = Nd.shape[0]
     n = 3 * n1
@@ -960,7 +960,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     return n_steps, OK
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def advance(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     """Advance ``state`` in place by ``n_steps``; returns (steps done, status code).  The state
     is only written after a step passed its checks, so it is left at the last good step.
@@ -968,7 +968,7 @@ def advance(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     return _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def advance_specialised(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     """Same as ``advance`` with ``flags`` forced to a compile-time literal: the switched-off terms
     are compiled out (measured +15-40 % speed on the robot scene) at the price of one ~20 s
@@ -977,7 +977,7 @@ def advance_specialised(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
     return _advance_impl(literally(flags), state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def evaluate(flags, state, t, amp_cmd, E, Nd, P):
     """Stats at the stored state (energy, volume, ...) for observation and the ledger."""
     n1 = Nd.shape[0]
@@ -993,7 +993,7 @@ def evaluate(flags, state, t, amp_cmd, E, Nd, P):
     return st, ksh, kveh, kint
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def stiffness_damping(flags, state, t, E, Nd, P):
     """Banded K and C at the stored state (for the stable-step estimate)."""
     n1 = Nd.shape[0]
