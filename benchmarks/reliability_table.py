@@ -10,24 +10,25 @@ here every example runs to the end and its outcome is counted instead of stoppin
 failure. "Survived" = the property held: a clear error naming what is wrong, or a run / the
 readable part of the file, and no traceback, hang or non-finite value.
 """
+
 from __future__ import annotations
 
 import argparse
 import collections
 import datetime
 import os
+from pathlib import Path
 import platform
 import signal
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'test'))
-os.environ.setdefault('PULSEJET_FUZZ_ALL_FLAGS', '1')   # also step lumped scenes with other terms
+os.environ.setdefault('PULSEJET_FUZZ_ALL_FLAGS', '1')  # also step lumped scenes with other terms
 
-from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import given, HealthCheck, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 MARKER_START = '<!-- reliability-table:start -->'
@@ -43,7 +44,7 @@ class Tally:
     def run(self, fn, *args) -> str | None:
         try:
             outcome = fn(*args)
-        except Exception as exc:   # the property failed: count it, keep going
+        except Exception as exc:  # the property failed: count it, keep going
             self.outcomes['FAILED'] += 1
             if len(self.failures) < 5:
                 self.failures.append(f'{type(exc).__name__}: {str(exc)[:300]}')
@@ -57,16 +58,22 @@ class Tally:
 
     @property
     def survived(self) -> int:
-        return self.tried - self.outcomes['FAILED'] - sum(n for k, n in self.outcomes.items() if k.startswith('known'))
+        return (
+            self.tried
+            - self.outcomes['FAILED']
+            - sum(n for k, n in self.outcomes.items() if k.startswith('known'))
+        )
 
 
 def _settings(n: int):
-    return settings(max_examples=n, deadline=None, database=None,
-                    suppress_health_check=list(HealthCheck))
+    return settings(
+        max_examples=n, deadline=None, database=None, suppress_health_check=list(HealthCheck)
+    )
 
 
 def fuzz_scenes(n: int, tmp: Path) -> Tally:
     import test_fuzz_inputs as F
+
     tally = Tally()
 
     @_settings(n)
@@ -74,12 +81,14 @@ def fuzz_scenes(n: int, tmp: Path) -> Tally:
     def run(case):
         text, _, mutations = case
         tally.run(F.check_scene_text, text, mutations, tmp)
+
     run()
     return tally
 
 
 def fuzz_commands(n: int) -> Tally:
     import test_fuzz_inputs as F
+
     tally = Tally()
     counts = collections.Counter()
 
@@ -90,10 +99,14 @@ def fuzz_commands(n: int) -> Tally:
         return outcome
 
     @_settings(n)
-    @given(name=st.sampled_from(['escape', 'pump_cycle', 'shell_robot', 'shell_cone']),
-           commands=st.lists(F.COMMANDS, min_size=1, max_size=12), steps=st.sampled_from([1, 2, 5]))
+    @given(
+        name=st.sampled_from(['escape', 'pump_cycle', 'shell_robot', 'shell_cone']),
+        commands=st.lists(F.COMMANDS, min_size=1, max_size=12),
+        steps=st.sampled_from([1, 2, 5]),
+    )
     def run(name, commands, steps):
         tally.run(check, name, commands, steps)
+
     run()
     tally.extra.update(counts)
     return tally
@@ -101,18 +114,21 @@ def fuzz_commands(n: int) -> Tally:
 
 def fuzz_sweeps(n: int, tmp: Path) -> Tally:
     import test_fuzz_inputs as F
+
     tally = Tally()
 
     @_settings(n)
     @given(text=F.sweep_texts())
     def run(text):
         tally.run(F.check_sweep_text, text, tmp)
+
     run()
     return tally
 
 
 def fuzz_mcap(n: int, tmp: Path) -> tuple[Tally, dict[str, Tally], float]:
     import test_mcap_corruption as M
+
     rec = M.Recording(M.make_recording(tmp / 'run.mcap'))
     cut_tally = Tally()
     recovered: list[float] = []
@@ -124,13 +140,14 @@ def fuzz_mcap(n: int, tmp: Path) -> tuple[Tally, dict[str, Tally], float]:
             n_read = len(M.read_messages(tmp / 'cut.mcap')[0])
             complete = sum(1 for end in rec.chunk_ends if end <= c)
             bound = M.read_messages_count_until(rec, complete) if complete else 0
-            recovered.append(n_read - bound)      # >= 0: beyond the complete chunks' messages
+            recovered.append(n_read - bound)  # >= 0: beyond the complete chunks' messages
         return outcome
 
     @_settings(n)
     @given(fraction=st.floats(0.0, 1.0), tools=st.booleans())
     def run_cut(fraction, tools):
         cut_tally.run(cut, fraction, tools)
+
     run_cut()
     cut_tally.extra['min_extra_messages'] = min(recovered) if recovered else 0
     kinds = {}
@@ -151,6 +168,7 @@ def fuzz_mcap(n: int, tmp: Path) -> tuple[Tally, dict[str, Tally], float]:
         @given(seed=st.integers(0, 2**32 - 1), tools=st.booleans())
         def run_corrupt(seed, tools):
             tally.run(corrupt, seed, tools)
+
         run_corrupt()
         ordered = sorted(lost_fraction) or [0.0]
         tally.extra['median_lost'] = ordered[len(ordered) // 2]
@@ -160,6 +178,7 @@ def fuzz_mcap(n: int, tmp: Path) -> tuple[Tally, dict[str, Tally], float]:
 
 def kill_runs(k: int, tmp: Path) -> tuple[Tally, list[float], Tally]:
     import test_repair as R
+
     busy, idle = Tally(), Tally()
     lost: list[float] = []
 
@@ -173,6 +192,7 @@ def kill_runs(k: int, tmp: Path) -> tuple[Tally, list[float], Tally]:
         proc.communicate(timeout=10)
         from pulsejet_sim.bag.reader import bag_info, iter_bag
         from pulsejet_sim.bag.repair import repair_file
+
         stamps = [m.msg.data for m in iter_bag(path, topics=['pulsejet/volume'])]
         lost.append(t_kill - stamps[-1])
         info = bag_info(path)
@@ -190,6 +210,7 @@ def kill_runs(k: int, tmp: Path) -> tuple[Tally, list[float], Tally]:
         proc.kill()
         proc.communicate(timeout=10)
         from pulsejet_sim.bag.reader import bag_info
+
         info = bag_info(path)
         assert info.counts['/pulsejet/volume'] == 1000, info.counts
         return 'nothing lost'
@@ -209,12 +230,75 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    return f'{platform.node()}: {cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, ' \
-           f'Python {platform.python_version()}'
+    return (
+        f'{platform.node()}: {cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, '
+        f'Python {platform.python_version()}'
+    )
 
 
 def fmt_outcomes(t: Tally) -> str:
     return ', '.join(f'{k} {v}' for k, v in sorted(t.outcomes.items()))
+
+
+def _stored(name: str):
+    """The JSON a live run stored in benchmarks/results (None if it was not run)."""
+    import json
+
+    path = REPO / 'benchmarks' / 'results' / f'{name}.json'
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def live_fuzz_row() -> tuple:
+    """From benchmarks/live_fuzz.py's stored run (not rerun here: it takes minutes of wall time)."""
+    what = 'live fuzz of sim_node topics, services and parameters (`benchmarks/live_fuzz.py`)'
+    stored = _stored('live_fuzz')
+    if stored is None:
+        return (what, 'not yet run', 'not yet run', 'not yet run', 'not yet run')
+    runs = stored['results']
+    sent = sum(r['messages_sent'] for r in runs)
+    calls = sum(r['sent']['service'] + r['sent']['parameter'] for r in runs)
+    seconds = sum(r['seconds'] for r in runs)
+    bad = sum(
+        r['nan_published'] + r['restarts_needed'] + r['tracebacks_in_log'] + (r['exit_code'] != 0)
+        for r in runs
+    )
+    rss = ', '.join(f"{r['scene']} {r['rss_growth']:+.1%}" for r in runs)
+    return (
+        what + f"; `{stored['command']}`",
+        f'{sent} commands + {calls} service/parameter calls in {seconds / 60:.0f} min',
+        f"scenes {', '.join(r['scene'] for r in runs)} at >= {min(r['rate_hz'] for r in runs):.0f} messages/s: "
+        'NaN, inf, 1e308, negative values, unknown names, stamps out of order, duplicates, random pause/step/'
+        'reset, live parameter changes',
+        f"{len(runs) - bad}/{len(runs)} runs: {sum(r['nan_published'] for r in runs)} non-finite values "
+        f"published, {sum(r['restarts_needed'] for r in runs)} restarts, "
+        f'RSS {rss}',
+        'none (commands past the subscription depth are superseded by later ones; see live_fuzz.md)',
+    )
+
+
+def soak_row() -> tuple:
+    """From benchmarks/soak.py's stored run."""
+    what = 'soak: 1 kHz publication, closed-loop controller, recorder (`benchmarks/soak.py`)'
+    stored = _stored('soak')
+    if stored is None:
+        return (what, 'not yet run', 'not yet run', 'not yet run', 'not yet run')
+    r = stored['result']
+    growth = ', '.join(f'{name} {g[0]:+.2%}' for name, g in r['rss'].items())
+    rec = r.get('recording', {})
+    return (
+        what + f"; `{stored['command']}`",
+        f"{r['minutes']:g} min",
+        'load of a closed loop at 1 kHz; parameter dump rounds throughout',
+        ('met' if not stored['misses'] else 'MISSED: ' + '; '.join(stored['misses']))
+        + f": RTF {r['rtf']:.4f}, watchdog trips {r['watchdog_trips']}, memory {growth}, "
+        f"parameter rounds {r['param_services']['rounds']} (max {r['param_services']['max_ms']:.0f} ms)",
+        rec.get('error')
+        or (
+            f"none: {sum(rec.get('messages', {}).values())} messages read back with rosbags"
+            if rec
+            else 'not recorded'
+        ),
+    )
 
 
 def table(examples: int, kills: int) -> str:
@@ -228,45 +312,93 @@ def table(examples: int, kills: int) -> str:
         busy, lost, idle = kill_runs(kills, tmp)
         wall = time.perf_counter() - started
     rows = [
-        ('scene files (valid and mutated: wrong types, NaN/inf/1e308, missing and unknown keys, '
-         'non-mapping sections, not-a-mapping or invalid YAML)', scenes.tried,
-         f'0-3 mutations per file; outcomes: {fmt_outcomes(scenes)}', f'{scenes.survived}/{scenes.tried}', 'n/a'),
-        ('command sequences into Simulation (any float, NaN, +-inf, 1e308, negative, subnormal)',
-         commands.tried, f'{int(commands.extra.get("applied", 0))} commands applied, '
-         f'{int(commands.extra.get("rejected", 0))} rejected; runs: {fmt_outcomes(commands)}',
-         f'{commands.survived}/{commands.tried}', 'none (no non-finite observation)'),
-        ('sweep files (mutated)', sweeps.tried, f'outcomes: {fmt_outcomes(sweeps)}',
-         f'{sweeps.survived}/{sweeps.tried}', 'n/a'),
-        ('MCAP cut at a random byte (reader, summary, resim, replay loading)', cut.tried,
-         f'outcomes: {fmt_outcomes(cut)}', f'{cut.survived}/{cut.tried}',
-         'only messages after the last complete chunk'),
+        (
+            'scene files (valid and mutated: wrong types, NaN/inf/1e308, missing and unknown keys, '
+            'non-mapping sections, not-a-mapping or invalid YAML)',
+            scenes.tried,
+            f'0-3 mutations per file; outcomes: {fmt_outcomes(scenes)}',
+            f'{scenes.survived}/{scenes.tried}',
+            'n/a',
+        ),
+        (
+            'command sequences into Simulation (any float, NaN, +-inf, 1e308, negative, subnormal)',
+            commands.tried,
+            f'{int(commands.extra.get("applied", 0))} commands applied, '
+            f'{int(commands.extra.get("rejected", 0))} rejected; runs: {fmt_outcomes(commands)}',
+            f'{commands.survived}/{commands.tried}',
+            'none (no non-finite observation)',
+        ),
+        (
+            'sweep files (mutated)',
+            sweeps.tried,
+            f'outcomes: {fmt_outcomes(sweeps)}',
+            f'{sweeps.survived}/{sweeps.tried}',
+            'n/a',
+        ),
+        (
+            'MCAP cut at a random byte (reader, summary, resim, replay loading)',
+            cut.tried,
+            f'outcomes: {fmt_outcomes(cut)}',
+            f'{cut.survived}/{cut.tried}',
+            'only messages after the last complete chunk',
+        ),
     ]
-    what = {'flip': '1-8 bit flips', 'overwrite': '1-512 random bytes overwritten', 'zero': 'up to 4 kB zeroed',
-            'length': 'a record length set to 2^40, 2^63 or 2^64-1', 'insert': '1-64 random bytes inserted',
-            'delete': '1-256 bytes deleted'}
+    what = {
+        'flip': '1-8 bit flips',
+        'overwrite': '1-512 random bytes overwritten',
+        'zero': 'up to 4 kB zeroed',
+        'length': 'a record length set to 2^40, 2^63 or 2^64-1',
+        'insert': '1-64 random bytes inserted',
+        'delete': '1-256 bytes deleted',
+    }
     for kind, t in kinds.items():
-        rows.append((f'MCAP corrupted ({what[kind]}; reader, summary, resim, replay loading)', t.tried,
-                     f'outcomes: {fmt_outcomes(t)}', f'{t.survived}/{t.tried}',
-                     f'median {t.extra["median_lost"]:.1%}, max {t.extra["max_lost"]:.0%} of the messages; '
-                     'never a message that was not recorded'))
+        rows.append(
+            (
+                f'MCAP corrupted ({what[kind]}; reader, summary, resim, replay loading)',
+                t.tried,
+                f'outcomes: {fmt_outcomes(t)}',
+                f'{t.survived}/{t.tried}',
+                f'median {t.extra["median_lost"]:.1%}, max {t.extra["max_lost"]:.0%} of the messages; '
+                'never a message that was not recorded',
+            )
+        )
     rows += [
-        ('writer process SIGKILLed mid-write, then `pulsejet repair`', busy.tried,
-         f'SIGKILL after 0.5-{0.5 + 0.1 * kills:.1f} s of writing at ~1 kHz', f'{busy.survived}/{busy.tried}',
-         f'max {max(lost) if lost else float("nan"):.3f} s of messages (flush period 0.25 s); '
-         'repaired files keep every channel metadata key'),
-        ('idle writer SIGKILLed', idle.tried, 'SIGKILL 0.55 s after the last write', f'{idle.survived}/{idle.tried}',
-         'none'),
-        ('live fuzz of sim_node topics, services and parameters', 'not yet run', 'not yet run', 'not yet run',
-         'not yet run'),
-        ('soak (long live runs with recorder restarts)', 'not yet run', 'not yet run', 'not yet run', 'not yet run'),
+        (
+            'writer process SIGKILLed mid-write, then `pulsejet repair`',
+            busy.tried,
+            f'SIGKILL after 0.5-{0.5 + 0.1 * kills:.1f} s of writing at ~1 kHz',
+            f'{busy.survived}/{busy.tried}',
+            f'max {max(lost) if lost else float("nan"):.3f} s of messages (flush period 0.25 s); '
+            'repaired files keep every channel metadata key',
+        ),
+        (
+            'idle writer SIGKILLed',
+            idle.tried,
+            'SIGKILL 0.55 s after the last write',
+            f'{idle.survived}/{idle.tried}',
+            'none',
+        ),
+        live_fuzz_row(),
+        soak_row(),
     ]
-    failures = [('scene', scenes), ('commands', commands), ('sweeps', sweeps), ('cut', cut), *kinds.items(),
-                ('kill', busy), ('idle kill', idle)]
-    lines = [MARKER_START,
-             f'Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC} on {machine()} by',
-             f'`{Path(sys.executable).name} benchmarks/reliability_table.py --examples {examples} --kills {kills}` '
-             f'({wall:.0f} s).', '',
-             '| inputs | tried | faults injected | survived | data lost |', '|---|---|---|---|---|']
+    failures = [
+        ('scene', scenes),
+        ('commands', commands),
+        ('sweeps', sweeps),
+        ('cut', cut),
+        *kinds.items(),
+        ('kill', busy),
+        ('idle kill', idle),
+    ]
+    lines = [
+        MARKER_START,
+        f'Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC} on {machine()} by',
+        f'`{Path(sys.executable).name} benchmarks/reliability_table.py --examples {examples} --kills {kills}` '
+        f'({wall:.0f} s).',
+        '',
+        '| inputs | tried | faults injected | survived | data lost |',
+        '|---|---|---|---|---|',
+    ]
     lines += [f'| {a} | {b} | {c} | {d} | {e} |' for a, b, c, d, e in rows]
     notes = [f'- {name}: {msg}' for name, t in failures for msg in t.failures]
     if notes:
@@ -277,10 +409,17 @@ def table(examples: int, kills: int) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--examples', type=int, default=300, help='examples per generator (default 300)')
-    parser.add_argument('--kills', type=int, default=5, help='SIGKILL runs of each kind (default 5)')
-    parser.add_argument('--out', default=str(REPO / 'docs' / 'RELIABILITY.md'),
-                        help='markdown file whose table (between the markers) is replaced')
+    parser.add_argument(
+        '--examples', type=int, default=300, help='examples per generator (default 300)'
+    )
+    parser.add_argument(
+        '--kills', type=int, default=5, help='SIGKILL runs of each kind (default 5)'
+    )
+    parser.add_argument(
+        '--out',
+        default=str(REPO / 'docs' / 'RELIABILITY.md'),
+        help='markdown file whose table (between the markers) is replaced',
+    )
     args = parser.parse_args(argv)
     text = table(args.examples, args.kills)
     out = Path(args.out)

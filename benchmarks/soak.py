@@ -1,0 +1,312 @@
+"""Soak: sim_node publishing at 1 kHz in real time with a closed-loop controller, for minutes.
+
+    .venv/bin/python benchmarks/soak.py [--minutes 10] [--rate-hz 1000] [--scene pump_cycle]
+                                        [--record] [--no-write]
+
+sim_node (real_time pacing, command watchdog on: 0.1 s of simulated time, safe action) and
+controller_node (closed_loop: it answers every published state with one atomic command, and its
+pump/valve routine inflates to a target volume it measures) run as processes in an isolated ROS
+domain with localhost discovery; with --record the recorder node writes /clock, the applied
+commands and /diagnostics to MCAP (read back at the end with rosbags). This process
+  - receives /clock and measures the real-time factor held (simulated s / wall s) over the whole
+    soak after a warm-up minute, and over each minute;
+  - reads sim_node's /diagnostics: watchdog trips (a trip with the controller alive is a missed
+    command period), wall time dropped, physics faults, commands accepted and rejected;
+  - samples every process's resident memory every 10 s; growth is measured from the end of the
+    warm-up minute to the end;
+  - times sim_node's parameter services the way `ros2 param dump` uses them (list_parameters,
+    then get_parameters of every name), one round after another, for the whole soak.
+Prints a table and writes benchmarks/results/soak.md (and soak.json, which
+benchmarks/reliability_table.py turns into its soak row). Exit code 1 if a target is missed:
+RTF 1.00 +- 0.01, memory growth < 5 %, no watchdog trip, no parameter round slower than 10 s.
+Not a test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+import sys
+import tempfile
+import time
+
+from live_common import (
+    cpu_seconds,
+    default_domain_id,
+    LiveClient,
+    node_env,
+    NodeProcess,
+    ParamProbe,
+    percentile,
+    rss_bytes,
+)
+from pulsejet_sim import interface
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import bench_common  # noqa: E402
+
+WARM_UP_S = float(__import__("os").environ.get("SOAK_WARM_UP_S", 60.0))
+RSS_PERIOD_S = 10.0
+RTF_TOLERANCE = 0.01
+RSS_GROWTH_LIMIT = 0.05
+RECORDED_TOPICS = [
+    interface.TOPIC_CLOCK,
+    interface.TOPIC_APPLIED_COMMAND,
+    f'{interface.TOPIC_DIAGNOSTICS}:diagnostic_msgs/msg/DiagnosticArray',
+]
+
+
+def rtf_over(clock: list, t0_wall: float, t1_wall: float) -> float:
+    """Simulated seconds per wall second between the first /clock at or after t0 and the last before t1."""
+    inside = [(w, s) for w, s in clock if t0_wall <= w <= t1_wall]
+    if len(inside) < 2:
+        return float('nan')
+    (w0, s0), (w1, s1) = inside[0], inside[-1]
+    return (s1 - s0) / (w1 - w0)
+
+
+def soak(minutes: float, rate_hz: float, scene: str, record: bool, domain: int, tmp: Path) -> dict:
+    env = node_env(domain)
+    procs = {
+        'controller_node': NodeProcess(
+            'pulsejet_ctrl.controller_node',
+            {'scene': scene, 'closed_loop': True},
+            tmp / 'controller_node.log',
+            env,
+        ),
+        'sim_node': NodeProcess(
+            'pulsejet_sim.sim_node',
+            {
+                'scene': scene,
+                'pacing': 'real_time',
+                'publish_rate_hz': float(rate_hz),
+                'watchdog_timeout_s': 0.1,
+                'watchdog_clock': 'sim',
+                'watchdog_action': 'safe',
+                'diagnostics_period_s': 1.0,
+                'wait_for_subscribers': 2,
+            },
+            tmp / 'sim_node.log',
+            env,
+        ),
+    }
+    bag = tmp / 'soak.mcap'
+    if record:
+        procs['recorder'] = NodeProcess(
+            'pulsejet_sim.recorder',
+            {'output': str(bag), 'topics': RECORDED_TOPICS},
+            tmp / 'recorder.log',
+            env,
+        )
+    client = LiveClient(domain, 'soak_monitor', keep_clock=True, state_topics=False)
+    probe = ParamProbe(client.node)
+    rss = {name: [] for name in procs}
+    try:
+        client.spin_until(
+            lambda: client.last_clock_s is not None and client.last_clock_s > 0.5,
+            180.0,
+            'sim_node to start and run',
+            list(procs.values()),
+        )
+        start = time.monotonic()
+        cpu0 = {name: cpu_seconds(p.pid) for name, p in procs.items()}
+        end = start + WARM_UP_S + minutes * 60.0
+        next_rss = start
+        while time.monotonic() < end:
+            client.executor.spin_once(timeout_sec=0.005)
+            probe.poll()
+            now = time.monotonic()
+            if now >= next_rss:
+                for name, p in procs.items():
+                    rss[name].append((now - start, rss_bytes(p.pid)))
+                next_rss += RSS_PERIOD_S
+            for name, p in procs.items():
+                if not p.alive():
+                    raise RuntimeError(
+                        f'{name} exited with {p.proc.returncode} during the soak:\n{p.output()[-2000:]}'
+                    )
+        wall = time.monotonic() - start
+        cpu = {name: (cpu_seconds(p.pid) - cpu0[name]) / wall for name, p in procs.items()}
+    finally:
+        exit_codes = {name: p.stop() for name, p in reversed(list(procs.items()))}
+        client.close()
+    measured0 = start + WARM_UP_S
+    clock = client.watch.clock_wall
+    minute_rtf = [
+        rtf_over(clock, measured0 + 60.0 * k, measured0 + 60.0 * (k + 1))
+        for k in range(int(minutes))
+    ]
+    diag = [d for d in client.watch.diagnostics if d[0] >= start]
+    last = diag[-1][3] if diag else {}
+    trips = sum(1 for _, _, _, values in diag if values.get('watchdog', '').startswith('tripped'))
+    periods = [b[0] - a[0] for a, b in zip(clock, clock[1:]) if a[0] >= measured0]
+    nominal = 1.0 / rate_hz
+    growth = {}
+    for name, samples in rss.items():
+        after = [v for t, v in samples if t >= WARM_UP_S]
+        growth[name] = (
+            (
+                (after[-1] - after[0]) / after[0],
+                after[0] / 2**20,
+                after[-1] / 2**20,
+                max(after) / 2**20,
+            )
+            if len(after) >= 2
+            else (float('nan'),) * 4
+        )
+    result = {
+        'scene': scene,
+        'rate_hz': rate_hz,
+        'minutes': minutes,
+        'wall_s': wall,
+        'rtf': rtf_over(clock, measured0, end),
+        'rtf_minute_min': min(minute_rtf, default=float('nan')),
+        'rtf_minute_max': max(minute_rtf, default=float('nan')),
+        'clock_messages': len(clock),
+        'period_jitter_p99_ms': percentile([abs(p - nominal) for p in periods], 99) * 1e3,
+        'watchdog_trips': trips,
+        'dropped_wall_s': last.get('dropped_wall_s', '?'),
+        'commands': {k: last.get(f'commands_{k}', '?') for k in ('accepted', 'rejected', 'stale')},
+        'faults': last.get('fault', '?') or 'none',
+        'error_diagnostics': sum(1 for d in diag if d[1] == 2),
+        'rss': growth,
+        'cpu': cpu,
+        'exit_codes': exit_codes,
+        'param_services': probe.summary(),
+    }
+    if record:
+        result['recording'] = read_back(bag)
+    return result
+
+
+def read_back(path: Path) -> dict:
+    """Messages per topic in the soak's recording, read with rosbags (an independent reader)."""
+    from rosbags.highlevel import AnyReader
+
+    counts = {}
+    try:
+        with AnyReader([path]) as reader:
+            for connection, _, _ in reader.messages():
+                counts[connection.topic] = counts.get(connection.topic, 0) + 1
+    except (
+        Exception
+    ) as exc:  # report it in the table: the soak's verdict says the recording failed
+        return {
+            'error': f'{type(exc).__name__}: {exc}',
+            'bytes': path.stat().st_size if path.exists() else 0,
+        }
+    return {'messages': counts, 'bytes': path.stat().st_size}
+
+
+def verdicts(r: dict) -> list[str]:
+    misses = []
+    if not abs(r['rtf'] - 1.0) <= RTF_TOLERANCE:
+        misses.append(f"real-time factor {r['rtf']:.4f} outside 1.00 +- {RTF_TOLERANCE}")
+    for name, (g, *_rest) in r['rss'].items():
+        if not g < RSS_GROWTH_LIMIT:
+            misses.append(f'{name} memory grew {g:+.1%} (limit {RSS_GROWTH_LIMIT:.0%})')
+    if r['watchdog_trips']:
+        misses.append(f"{r['watchdog_trips']} diagnostics with the watchdog tripped")
+    if r['param_services']['starved']:
+        misses.append(f"{r['param_services']['starved']} parameter rounds slower than 10 s")
+    if r['error_diagnostics']:
+        misses.append(f"{r['error_diagnostics']} ERROR diagnostics")
+    if 'error' in r.get('recording', {}):
+        misses.append(f"recording unreadable: {r['recording']['error']}")
+    return misses
+
+
+def table(r: dict) -> str:
+    p = r['param_services']
+    rows = [
+        ('scene, publication rate', f"{r['scene']}, {r['rate_hz']:g} Hz"),
+        ('soak length (after a 60 s warm-up)', f"{r['minutes']:g} min"),
+        ('real-time factor held (target 1.00 +- 0.01)', f"{r['rtf']:.4f}"),
+        (
+            'real-time factor, worst / best minute',
+            f"{r['rtf_minute_min']:.4f} / {r['rtf_minute_max']:.4f}",
+        ),
+        (
+            '/clock messages received; period jitter p99',
+            f"{r['clock_messages']}; {r['period_jitter_p99_ms']:.3f} ms",
+        ),
+        ('wall time dropped by sim_node', f"{r['dropped_wall_s']} s"),
+        (
+            'commands accepted / rejected / stale',
+            '{accepted} / {rejected} / {stale}'.format(**r['commands']),
+        ),
+        ('watchdog trips (must be 0)', str(r['watchdog_trips'])),
+        ('physics fault; ERROR diagnostics', f"{r['faults']}; {r['error_diagnostics']}"),
+        (
+            'parameter dump rounds (list + get): p50 / p99 / max; slower than 10 s',
+            f"{p['rounds']}: {p['p50_ms']:.1f} / {p['p99_ms']:.1f} / {p['max_ms']:.1f} ms; {p['starved']}",
+        ),
+    ]
+    for name, (g, first, last, peak) in r['rss'].items():
+        rows.append(
+            (
+                f'{name} RSS after warm-up -> end (max), growth (limit 5 %)',
+                f'{first:.1f} -> {last:.1f} MB ({peak:.1f}), {g:+.2%}',
+            )
+        )
+    rows.append(('CPU (user+sys / wall)', ', '.join(f'{n} {c:.0%}' for n, c in r['cpu'].items())))
+    rows.append(
+        ('exit codes on SIGINT', ', '.join(f'{n} {c}' for n, c in r['exit_codes'].items()))
+    )
+    if 'recording' in r:
+        rec = r['recording']
+        rows.append(
+            (
+                'recording read back with rosbags',
+                rec.get('error')
+                or f"{rec['bytes'] / 2**20:.1f} MB, "
+                + ', '.join(f'{t} {n}' for t, n in sorted(rec['messages'].items())),
+            )
+        )
+    return '| metric | value |\n|---|---|\n' + ''.join(f'| {a} | {b} |\n' for a, b in rows)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument(
+        '--minutes', type=float, default=10.0, help='measured minutes (after a 60 s warm-up)'
+    )
+    ap.add_argument('--rate-hz', type=float, default=1000.0, help="sim_node's publication rate")
+    ap.add_argument('--scene', default='pump_cycle')
+    ap.add_argument(
+        '--record', action='store_true', help='also run the recorder and read its file back'
+    )
+    ap.add_argument('--no-write', action='store_true', help='print only')
+    args = ap.parse_args(argv)
+    if not args.minutes >= 1:
+        ap.error(f'--minutes {args.minutes}: must be >= 1')
+    with tempfile.TemporaryDirectory(prefix='pulsejet_soak_') as tmp:
+        r = soak(
+            args.minutes, args.rate_hz, args.scene, args.record, default_domain_id(), Path(tmp)
+        )
+    command = 'python benchmarks/soak.py ' + ' '.join(sys.argv[1:] if argv is None else argv)
+    misses = verdicts(r)
+    text = (
+        bench_common.header('Soak of sim_node with a closed-loop controller', command.strip())
+        + table(r)
+        + '\nVerdict: '
+        + ('every target met.' if not misses else 'MISSED: ' + '; '.join(misses))
+        + '\n'
+    )
+    if args.no_write:
+        print(text)
+    else:
+        bench_common.write('soak', text)
+        (bench_common.RESULTS / 'soak.json').write_text(
+            json.dumps(
+                {'command': command.strip(), 'result': r, 'misses': misses}, indent=1, default=str
+            )
+            + '\n'
+        )
+    return 1 if misses else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
