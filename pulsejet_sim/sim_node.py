@@ -63,6 +63,7 @@ import sys
 import threading
 import time
 
+import numpy as np
 from pulsejet_sim import messages
 from pulsejet_sim.engine import session as eng
 from pulsejet_sim.engine.outbox import TimedOutbox
@@ -230,6 +231,7 @@ LIVE_CONFIG = (
     'watchdog_action',
 )
 GIL_SWITCH_INTERVAL_S = 2e-4
+PROFILE_RATE_MAX_HZ = 100.0
 #: command-rejection warnings: a burst of this many, then this many per second; the rest are only
 #: counted (commands_rejected in /diagnostics) and summed up in the next warning
 REJECTION_LOG_BURST = 10
@@ -342,6 +344,10 @@ class SimNode(Node):
             + (messages.TOPIC_ENERGY_LEDGER, messages.TOPIC_APPLIED_COMMAND)
         }
         self.has_profile = sim.profile() is not None
+        # the meridian (tens of points) at most PROFILE_RATE_MAX_HZ: at 1 kHz it would cost more
+        # than the rest of the state; every ledger publication carries one too
+        self._profile_every = max(1, int(math.ceil(rate / PROFILE_RATE_MAX_HZ - 1e-9)))
+        self._states_built = 0
         if self.has_profile:
             self._pubs[messages.TOPIC_MANTLE_PROFILE] = self.create_publisher(
                 messages.message_class(messages.TOPIC_MANTLE_PROFILE),
@@ -531,11 +537,12 @@ class SimNode(Node):
         if not eng.observation_is_finite(obs):  # never publish NaN
             return []
         calls = []
-        profile = self.sim.profile() if self.has_profile else None
-        if profile is not None and not all(
-            math.isfinite(float(v)) for arr in profile for v in arr
-        ):
-            profile = None
+        self._states_built += 1
+        profile = None
+        if self.has_profile and (ledger or self._states_built % self._profile_every == 0):
+            profile = self.sim.profile()
+            if not all(np.isfinite(arr).all() for arr in profile):
+                profile = None
         if profile is not None:  # before /clock, which the state's consumers take as its end
             calls.append(
                 functools.partial(
