@@ -1,7 +1,10 @@
-"""What the live reliability runs (live_fuzz.py, soak.py) share: node processes in an isolated ROS
-domain, an in-process rclpy node that checks every published state for non-finite values, the
-processes' resident memory, and a prober that times the parameter services the way `ros2 param
-dump` uses them (list_parameters, then get_parameters of every name)."""
+"""
+What the live reliability runs (live_fuzz.py, soak.py) share.
+
+Node processes in an isolated ROS domain, an in-process rclpy node that checks every published
+state for non-finite values, the processes' resident memory, and a prober that times the parameter
+services the way `ros2 param dump` uses them (list_parameters, then get_parameters of every name).
+"""
 
 from __future__ import annotations
 
@@ -20,7 +23,7 @@ from pulsejet_sim.harness import default_domain_id, NodeProcess  # noqa: E402
 
 
 def node_env(domain: int) -> dict:
-    """The children's environment: the domain, localhost discovery, unbuffered plain logs."""
+    """Return the children's environment: domain, localhost discovery, unbuffered plain logs."""
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'  # this process's participant too
     return dict(
         os.environ,
@@ -44,7 +47,7 @@ def rss_bytes(pid: int) -> float:
 
 
 def cpu_seconds(pid: int) -> float:
-    """user + system CPU seconds of a process (Linux /proc), NaN once it is gone."""
+    """Return user + system CPU seconds of a process (Linux /proc), NaN once it is gone."""
     try:
         fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
         return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
@@ -78,7 +81,11 @@ class StateWatch:
 
 
 class LiveClient:
-    """An rclpy context + node in the test domain, subscribed to every state topic and /diagnostics."""
+    """
+    An rclpy context + node in the test domain.
+
+    Subscribed to every state topic and /diagnostics.
+    """
 
     def __init__(
         self, domain: int, name: str, keep_clock: bool = False, state_topics: bool = True
@@ -197,9 +204,13 @@ class LiveClient:
 
 
 class ParamProbe:
-    """Times sim_node's parameter services as `ros2 param dump` uses them: list_parameters, then
-    get_parameters of every listed name. A round that does not finish in `timeout_s` is a starved
-    service; the prober waits for it (it never sends a second round on top of a pending one)."""
+    """
+    Time sim_node's parameter services as `ros2 param dump` uses them.
+
+    First list_parameters, then get_parameters of every listed name. A round that does not finish
+    in `timeout_s` is a starved service; the prober waits for it (it never sends a second round on
+    top of a pending one).
+    """
 
     def __init__(self, node, target: str = '/sim_node', timeout_s: float = 10.0):
         from rcl_interfaces.srv import GetParameters, ListParameters

@@ -1,10 +1,13 @@
-"""Live fuzz of sim_node: floods its command topics, services and parameters and counts what breaks.
+"""
+Live fuzz of sim_node: floods its command topics, services and parameters and counts what breaks.
 
-    .venv/bin/python benchmarks/live_fuzz.py [--seconds 300] [--scene pump_cycle --scene shell_robot]
+    .venv/bin/python benchmarks/live_fuzz.py [--seconds 300]
+                                             [--scene pump_cycle --scene shell_robot]
                                              [--rate-hz 2000] [--seed 1] [--no-write]
 
 For each scene a real sim_node runs as a process (real_time pacing, command watchdog on) in an
-isolated ROS domain with localhost discovery. This process floods it at `--rate-hz` (>= 1 kHz) with:
+isolated ROS domain with localhost discovery. This process floods it at `--rate-hz` (>= 1 kHz)
+with:
   - per-actuator commands (std_msgs/Float64) and atomic commands (sensor_msgs/JointState) whose
     values are drawn from in-range numbers, NaN, +-inf, 1e308, negatives and subnormals; atomic
     commands with unknown or missing names, mismatched lengths, no stamp, stamps in the past or the
@@ -30,7 +33,11 @@ import sys
 import tempfile
 import time
 
-from live_common import (
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import bench_common  # noqa: E402
+from live_common import (  # noqa: E402
     cpu_seconds,
     default_domain_id,
     LiveClient,
@@ -39,11 +46,7 @@ from live_common import (
     ParamProbe,
     rss_bytes,
 )
-from pulsejet_sim import interface
-
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-import bench_common  # noqa: E402
+from pulsejet_sim import interface  # noqa: E402
 
 WEIRD = (float('nan'), float('inf'), -float('inf'), 1e308, -1e308, -1.0, 5e-324, 0.0)
 SERVICE_TIMEOUT_S = 10.0
@@ -196,7 +199,11 @@ class Flood:
         self.sent['parameter'] += 1
 
     def collect(self, final: bool = False) -> None:
-        """Count the answers; a call unanswered after SERVICE_TIMEOUT_S (or at the end) is unanswered."""
+        """
+        Count the answers.
+
+        A call unanswered after SERVICE_TIMEOUT_S (or at the end) is unanswered.
+        """
         keep = []
         now = time.monotonic()
         for future, kind, sent in self.pending:
@@ -216,7 +223,11 @@ class Flood:
 
 
 def restore(flood: Flood) -> None:
-    """Put sim_node back to running real time, so the next period of fuzzing has a moving target."""
+    """
+    Put sim_node back to running real time.
+
+    The next period of fuzzing then has a moving target.
+    """
     from rcl_interfaces.srv import SetParameters
     from rclpy.parameter import Parameter
     from std_srvs.srv import SetBool
@@ -354,8 +365,8 @@ def table(results: list[dict]) -> str:
         ),
         (
             'of which atomic / per-actuator / duplicates / stamped in the past',
-            lambda r: f"{r['sent']['atomic']} / {r['sent']['actuator']} / {r['sent']['duplicate']} / "
-            f"{r['sent']['out_of_order']}",
+            lambda r: f"{r['sent']['atomic']} / {r['sent']['actuator']} / "
+            f"{r['sent']['duplicate']} / {r['sent']['out_of_order']}",
         ),
         (
             'commands accepted / rejected / stale (sim_node /diagnostics; warnings logged)',
@@ -379,8 +390,8 @@ def table(results: list[dict]) -> str:
         ('sim_node exit code on SIGINT', lambda r: str(r['exit_code'])),
         (
             'sim_node RSS after warm-up -> end (max)',
-            lambda r: f"{r['rss_start_mb']:.1f} -> {r['rss_end_mb']:.1f} MB ({r['rss_max_mb']:.1f}), "
-            f"{r['rss_growth']:+.1%}",
+            lambda r: f"{r['rss_start_mb']:.1f} -> {r['rss_end_mb']:.1f} MB "
+            f"({r['rss_max_mb']:.1f}), {r['rss_growth']:+.1%}",
         ),
         (
             'parameter dump rounds (list + get): p50 / p99 / max, starved > 10 s',

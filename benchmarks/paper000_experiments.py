@@ -1,4 +1,6 @@
-"""Experiments that explain the paper 000 study's misses (benchmarks/results/paper000_study/README.md).
+"""
+Experiments explaining the paper 000 study's misses (benchmarks/results/paper000_study/README.md).
+
 Not the study: its values stay as chosen; each experiment changes one reading of the lost text and
 reruns the study's finding rules on it. Writes benchmarks/results/paper000_study/experiments.md.
 
@@ -9,49 +11,62 @@ reruns the study's finding rules on it. Writes benchmarks/results/paper000_study
 Runs go one after the other in this process (one core). Experiments marked `refine` also rerun
 every case at twice the elements and half the step (the study's REFINED) and store both.
 
-A. strain_load: the cable load read as a strain instead of a force: the pull scales with the Young's
-   modulus, 15 N x E / 40 kPa, so every mantle is pulled to about the same deformation (findings 1, 2).
+A. strain_load: the cable load read as a strain instead of a force: the pull scales with the
+   Young's modulus, 15 N x E / 40 kPa, so every mantle is pulled to about the same deformation
+   (findings 1, 2).
 B. proportional: the muscle's desired radius read as `proportional` (a uniform fraction of the rest
    radius) instead of `constant_depth` (findings 3, 4, 5).
 C. fig12_edge: the muscle's desired radius read as `constant_depth_to_edge`: Fig. 12's function
-   "linear (constant) for most of the mantle profile" (section 5.2) held up to the free edge, tapered
-   at the pole only, so the muscle narrows the nozzle too (findings 3, 4, 5; both couplings).
+   "linear (constant) for most of the mantle profile" (section 5.2) held up to the free edge,
+   tapered at the pole only, so the muscle narrows the nozzle too (findings 3, 4, 5; both
+   couplings).
 D. fixed_nozzle: in the paper coupling, the jet leaves through a fixed nozzle of 12.5 mm radius
    (`jet.outlet: free_edge_fixed_nozzle`) instead of the mantle's edge, the edge staying free: the
    authors' later code (github.com/federicorenda/Unified-Multi-soft-body-Dynamics, octopus_driver.m
    `Rn = 12.5e-3; Area_out = pi*Rn.^2`, used unchanged in octopus_derivatives.m's thrust) keeps the
    exit area fixed whatever the shell does (findings 1, 2; external cases, paper coupling).
-E. authors_code: the authors' code as written (`coupling: paper_code`, docs/PHYSICS_SHELL.md "Experiment E"):
-   pole clamped and edge free, fixed 12.5 mm nozzle, a refilling force, thrust + refill + body drag as a
-   uniform axial load on the wall, added mass 1.1 x the shell's own mass in every translation, the
-   shell's inertia in the vehicle's frame; all 54 cases of the study's `paper` coupling (36 external, 18 internal) (all findings).
+E. authors_code: the authors' code as written (`coupling: paper_code`, docs/PHYSICS_SHELL.md
+   "Experiment E"): pole clamped and edge free, fixed 12.5 mm nozzle, a refilling force, thrust +
+   refill + body drag as a uniform axial load on the wall, added mass 1.1 x the shell's own mass in
+   every translation, the shell's inertia in the vehicle's frame; all 54 cases of the study's
+   `paper` coupling (36 external, 18 internal) (all findings).
 """
+
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 import datetime
 import os
+from pathlib import Path
 import platform
 import sys
 import time
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import paper000_study as study  # noqa: E402
-from pulsejet_sim.sweep import RunRow, RunSpec, load_sweep, merge  # noqa: E402
+from pulsejet_sim.sweep import load_sweep, merge, RunRow, RunSpec  # noqa: E402
 
-FINER = {'mesh': {'elements': 384}, 'simulation': {'dt_s': 1.25e-4}}   # for a run the refined one moves > 2 %
+FINER = {
+    'mesh': {'elements': 384},
+    'simulation': {'dt_s': 1.25e-4},
+}  # for a run the refined one moves > 2 %
 MODULI = {'E20k': 20000.0, 'E40k': 40000.0, 'E80k': 80000.0}
 COUPLINGS = ('paper', 'consistent')
 
 
 def changed(spec: RunSpec, override: dict) -> RunSpec:
-    return RunSpec(spec.study, spec.labels, spec.scene, merge(dict(spec.overrides), override), spec.duration_s,
-                   spec.replace)
+    return RunSpec(
+        spec.study,
+        spec.labels,
+        spec.scene,
+        merge(dict(spec.overrides), override),
+        spec.duration_s,
+        spec.replace,
+    )
 
 
 def strain_sized(spec: RunSpec) -> RunSpec:
@@ -72,82 +87,130 @@ def fixed_nozzle(spec: RunSpec) -> RunSpec:
 
 
 def authors_code(spec: RunSpec) -> RunSpec:
-    return changed(spec, {'coupling': 'paper_code',
-                          'jet': {'outlet': 'free_edge_fixed_nozzle', 'outlet_radius_m': 0.0125}})
+    return changed(
+        spec,
+        {
+            'coupling': 'paper_code',
+            'jet': {'outlet': 'free_edge_fixed_nozzle', 'outlet_radius_m': 0.0125},
+        },
+    )
 
 
 @dataclass(frozen=True)
 class Experiment:
     letter: str
     title: str
-    study: str                    # which of the study's cases it reruns ('both': external and internal)
+    study: str  # which of the study's cases it reruns ('both': external and internal)
     change: Callable[[RunSpec], RunSpec]
     couplings: tuple[str, ...]
-    refine: bool                  # rerun every case at study.REFINED and store both
+    refine: bool  # rerun every case at study.REFINED and store both
     note: str = ''
 
 
 EXPERIMENTS = {
-    'strain_load': Experiment('A', 'Cable load as a strain: 15 N x E / 40 kPa (10 N at 20 kPa ... 30 N at 80 kPa)',
-                              'external', strain_sized, COUPLINGS, False),
-    'proportional': Experiment('B', 'Muscle desired radius `proportional` instead of `constant_depth`',
-                               'internal', proportional, COUPLINGS, False),
+    'strain_load': Experiment(
+        'A',
+        'Cable load as a strain: 15 N x E / 40 kPa (10 N at 20 kPa ... 30 N at 80 kPa)',
+        'external',
+        strain_sized,
+        COUPLINGS,
+        False,
+    ),
+    'proportional': Experiment(
+        'B',
+        'Muscle desired radius `proportional` instead of `constant_depth`',
+        'internal',
+        proportional,
+        COUPLINGS,
+        False,
+    ),
     'fig12_edge': Experiment(
-        'C', 'Muscle desired radius `constant_depth_to_edge` instead of `constant_depth` (Fig. 12 held up to the edge)',
-        'internal', to_edge, COUPLINGS, True,
-        'Reading: section 5.2 says "the desired radius function is linear (constant) for most of the mantle '
-        'profile and thus more attuned with the linear conical profile", and the introduction "The '
-        'contraction of the mantle is ensured by a network of circular muscles symmetrically arranged all '
-        'around the body". The study\'s `constant_depth` tapers the function to zero over 15 % of the meridian'
-        ' at both ends, so the muscle never narrows the free edge (the nozzle). Here the function keeps its '
-        'constant depth (25 % of the largest radius) up to the edge and tapers at the pole only (where the '
-        'cone\'s rounded tip and the ellipsoid\'s pole cannot take a constant depth): "most of the mantle '
-        'profile" is read as all but the pole. Everything else is the study\'s; the 18 internal cases in both '
-        'couplings.'),
+        'C',
+        'Muscle desired radius `constant_depth_to_edge` instead of `constant_depth` (Fig. 12 held '
+        'up to the edge)',
+        'internal',
+        to_edge,
+        COUPLINGS,
+        True,
+        'Reading: section 5.2 says "the desired radius function is linear (constant) for most of '
+        'the mantle profile and thus more attuned with the linear conical profile", and the '
+        'introduction "The contraction of the mantle is ensured by a network of circular muscles '
+        'symmetrically arranged all around the body". The study\'s `constant_depth` tapers the '
+        'function to zero over 15 % of the meridian at both ends, so the muscle never narrows the '
+        'free edge (the nozzle). Here the function keeps its constant depth (25 % of the largest '
+        "radius) up to the edge and tapers at the pole only (where the cone's rounded tip and the "
+        'ellipsoid\'s pole cannot take a constant depth): "most of the mantle profile" is read as '
+        "all but the pole. Everything else is the study's; the 18 internal cases in both "
+        'couplings.',
+    ),
     'fixed_nozzle': Experiment(
-        'D', 'Paper coupling: a fixed 12.5 mm nozzle (`jet.outlet: free_edge_fixed_nozzle`) instead of the mantle edge',
-        'external', fixed_nozzle, ('paper',), True,
-        'Reading: paper 000 gives no exit-area equation ("The outflow speed is given by: where" lost) and no '
-        "minimum opening. The authors' later code of the same shell "
-        '(github.com/federicorenda/Unified-Multi-soft-body-Dynamics, `octopus_driver.m`: `Rn = 12.5e-3; % [m]'
-        ' Raggio Nuzzle`, `Area_out = pi*Rn.^2`; `octopus_derivatives.m`: `mod_thrust = '
-        '-sign(Vol_punto)*(ro_water*Vol_punto^2)*((Vol_punto<0)*Cf/(Area_out*Aream)+...)`) uses a fixed exit '
-        'area whatever the shell does, leaves the shell\'s open end free (its "condizioni su X=L" are '
-        'zero-stress) and puts no cavity pressure on the wall. So only the exit area changes here: the edge '
-        'stays free as in the study, the jet leaves through a fixed nozzle of 12.5 mm radius (for the '
-        "ellipsoid its opening at rest, for the cone a nozzle inside its 30 mm edge), the inlet is the code's"
-        " `Area_out + 3*pi*Rb.^2`, Rb = 10 mm (the model's default). The 36 external cases in the paper "
-        'coupling (the consistent coupling already stops the wall before the nozzle shuts).'),
+        'D',
+        'Paper coupling: a fixed 12.5 mm nozzle (`jet.outlet: free_edge_fixed_nozzle`) instead of '
+        'the mantle edge',
+        'external',
+        fixed_nozzle,
+        ('paper',),
+        True,
+        'Reading: paper 000 gives no exit-area equation ("The outflow speed is given by: where" '
+        "lost) and no minimum opening. The authors' later code of the same shell "
+        '(github.com/federicorenda/Unified-Multi-soft-body-Dynamics, `octopus_driver.m`: `Rn = '
+        '12.5e-3; % [m] Raggio Nuzzle`, `Area_out = pi*Rn.^2`; `octopus_derivatives.m`: '
+        '`mod_thrust = '
+        '-sign(Vol_punto)*(ro_water*Vol_punto^2)*((Vol_punto<0)*Cf/(Area_out*Aream)+...)`) uses a '
+        "fixed exit area whatever the shell does, leaves the shell's open end free (its "
+        '"condizioni su X=L" are zero-stress) and puts no cavity pressure on the wall. So only '
+        'the exit area changes here: the edge stays free as in the study, the jet leaves through '
+        'a fixed nozzle of 12.5 mm radius (for the ellipsoid its opening at rest, for the cone a '
+        "nozzle inside its 30 mm edge), the inlet is the code's `Area_out + 3*pi*Rb.^2`, Rb = 10 "
+        "mm (the model's default). The 36 external cases in the paper coupling (the consistent "
+        'coupling already stops the wall before the nozzle shuts).',
+    ),
     'authors_code': Experiment(
-        'E', "The authors' code as written (`coupling: paper_code`) in place of the `paper` coupling",
-        'both', authors_code, ('paper',), True,
-        "Reading (decided and written into docs/PHYSICS_SHELL.md, \"Experiment E: the authors' code\", with the "
-        "code's lines quoted, before any run): the six places where the study's `paper` coupling departs from the "
-        'authors\' public code of the same shell (github.com/federicorenda/Unified-Multi-soft-body-Dynamics, '
-        'commit 2cabfe59, `octopus_driver.m`, `octopus_derivatives.m`), adopted together: (1) the polar cap up to '
-        'the first node whose wall has turned by pi/4 is rigid, part of the body, its rim clamped (first version, the pole node alone, stopped after 5 runs: see the doc) and the open edge is free in r, z and theta (`sigmas_o = zeros(6,1)` at X = 0, '
-        'the "buco anteriore"; zero-stress "condizioni su X=L"); (2) a fixed 12.5 mm nozzle, `Area_out = '
-        'pi*Rn.^2`, `Area_in = Area_out+3*pi*Rb.^2`; (3) a refilling force `-Cf rho V\'^2/A_in` '
-        '(`(Vol_punto>0)*Cf/(Area_in*Aream)`); (4) thrust, refilling force and body drag as a uniform axial '
-        'load per reference area on the wall (`fluid = mod_fluid*[senth;costh;0]`, `zetas_e = [0;0;0;fluid]`), '
-        'reaching the vehicle only through the clamped rim (`F_is1r`); no cavity pressure, no tangential '
-        'drag on the wall; (5) added mass 1.1 x the shell\'s own mass in r and z (`Gammas_ag = '
-        'Gammas+ro_shel*B*diag([0 0 0 2*h 2*h 2*h])`); (6) the shell\'s inertia sees the vehicle\'s '
-        'acceleration (`- sigmar_bar_punto`), the vehicle solved with the shell. Every study value stays (the '
-        'code\'s actuation, masses, geometry and head drag are not adopted; the study\'s internal water and '
-        'ram stay). The 54 cases of the study\'s `paper` coupling (36 external, 18 internal), all five '
-        'findings; runs keep the study\'s names (`.../paper/...`).'),
+        'E',
+        "The authors' code as written (`coupling: paper_code`) in place of the `paper` coupling",
+        'both',
+        authors_code,
+        ('paper',),
+        True,
+        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment E: the authors\' '
+        'code", with the code\'s lines quoted, before any run): the six places where the study\'s '
+        "`paper` coupling departs from the authors' public code of the same shell "
+        '(github.com/federicorenda/Unified-Multi-soft-body-Dynamics, commit 2cabfe59, '
+        '`octopus_driver.m`, `octopus_derivatives.m`), adopted together: (1) the polar cap up to '
+        'the first node whose wall has turned by pi/4 is rigid, part of the body, its rim clamped '
+        '(first version, the pole node alone, stopped after 5 runs: see the doc) and the open '
+        'edge is free in r, z and theta (`sigmas_o = zeros(6,1)` at X = 0, the "buco anteriore"; '
+        'zero-stress "condizioni su X=L"); (2) a fixed 12.5 mm nozzle, `Area_out = pi*Rn.^2`, '
+        "`Area_in = Area_out+3*pi*Rb.^2`; (3) a refilling force `-Cf rho V'^2/A_in` "
+        '(`(Vol_punto>0)*Cf/(Area_in*Aream)`); (4) thrust, refilling force and body drag as a '
+        'uniform axial load per reference area on the wall (`fluid = mod_fluid*[senth;costh;0]`, '
+        '`zetas_e = [0;0;0;fluid]`), reaching the vehicle only through the clamped rim '
+        '(`F_is1r`); no cavity pressure, no tangential drag on the wall; (5) added mass 1.1 x the '
+        "shell's own mass in r and z (`Gammas_ag = Gammas+ro_shel*B*diag([0 0 0 2*h 2*h 2*h])`); "
+        "(6) the shell's inertia sees the vehicle's acceleration (`- sigmar_bar_punto`), the "
+        "vehicle solved with the shell. Every study value stays (the code's actuation, masses, "
+        "geometry and head drag are not adopted; the study's internal water and ram stay). The 54 "
+        "cases of the study's `paper` coupling (36 external, 18 internal), all five findings; "
+        "runs keep the study's names (`.../paper/...`).",
+    ),
 }
 
 
 def measure(spec: RunSpec) -> RunRow:
-    """sweep.run_one's metrics (the study's columns, computed the same way) plus the smallest radius
-    of the mantle's edge node over the run."""
+    """
+    Measure sweep.run_one's metrics plus the smallest radius of the mantle's edge node.
+
+    The metrics are the study's columns, computed the same way; the radius is the smallest of the
+    mantle's edge node over the run.
+    """
     from pulsejet_sim.runner import Drive
     from pulsejet_sim.scene import load_scene
+
     row = RunRow(name=spec.name, study=spec.study, labels=dict(spec.labels))
     try:
-        drive = Drive(load_scene(spec.scene, dict(spec.overrides), replace=spec.replace), spec.duration_s)
+        drive = Drive(
+            load_scene(spec.scene, dict(spec.overrides), replace=spec.replace), spec.duration_s
+        )
     except ValueError as err:
         row.fault = f'refused: {err}'
         return row
@@ -185,10 +248,15 @@ def run_all(specs: list[RunSpec]) -> list[dict]:
         row = study.as_rows([spec], [res])[0]
         for k in ('edge_radius_min_m', 'edge_radius_rest_m'):
             row[k] = res.metrics.get(k, float('nan'))
-        row['label'] = '/'.join(row[k] for k in ('mantle', 'stiffness', 'routine', 'distribution') if row.get(k))
+        row['label'] = '/'.join(
+            row[k] for k in ('mantle', 'stiffness', 'routine', 'distribution') if row.get(k)
+        )
         rows.append(row)
-        print(f'{i + 1}/{len(specs)} {spec.name}: {row["peak_speed_m_s"]:.4g} m/s {res.fault or ""}',
-              file=sys.stderr, flush=True)
+        print(
+            f'{i + 1}/{len(specs)} {spec.name}: {row["peak_speed_m_s"]:.4g} m/s {res.fault or ""}',
+            file=sys.stderr,
+            flush=True,
+        )
     return rows
 
 
@@ -200,38 +268,59 @@ def verdicts(rows, stored, keep, coupling, prefix):
 
 def section(key: str, exp: Experiment, specs: list[RunSpec], stored: list[dict]) -> str:
     start = time.perf_counter()
-    cases = [exp.change(s) for s in specs
-             if exp.study in ('both', s.study) and dict(s.labels)['coupling'] in exp.couplings]
+    cases = [
+        exp.change(s)
+        for s in specs
+        if exp.study in ('both', s.study) and dict(s.labels)['coupling'] in exp.couplings
+    ]
     rows = run_all(cases)
     fine = run_all([study.refined(s) for s in cases]) if exp.refine else []
     # a run whose refined value moved by more than study.CONVERGED is run once more, at twice the
     # refined elements and half its step, to show which of the two is converged
-    loose = [i for i, (r, f) in enumerate(zip(rows, fine))
-             if abs(r['peak_speed_m_s'] / f['peak_speed_m_s'] - 1.0) > study.CONVERGED]
+    loose = [
+        i
+        for i, (r, f) in enumerate(zip(rows, fine))
+        if abs(r['peak_speed_m_s'] / f['peak_speed_m_s'] - 1.0) > study.CONVERGED
+    ]
     finer = dict(zip(loose, run_all([changed(cases[i], FINER) for i in loose])))
     wall = time.perf_counter() - start
     keep = {'external': 'internal', 'internal': 'external'}.get(exp.study, '')
     prefix = '' if exp.study == 'both' else exp.study
     lines = [f'## {exp.letter}. {exp.title}', '']
     if exp.refine:
-        lines += [f'Experiment `{key}` ({datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, '
-                  f'{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; command '
-                  f'`.venv/bin/python benchmarks/paper000_experiments.py --only {key}`, one process, '
-                  f'{wall:.0f} s wall; '
-                  f'{len(cases)} runs at the study\'s 96 elements / 0.5 ms and again at 192 / 0.25 ms).', '']
+        lines += [
+            f'Experiment `{key}` '
+            f'({datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, '
+            f'{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; '
+            f'command `.venv/bin/python benchmarks/paper000_experiments.py --only {key}`, '
+            f'one process, {wall:.0f} s wall; '
+            f"{len(cases)} runs at the study's 96 elements / 0.5 ms and again at 192 / 0.25 ms).",
+            '',
+        ]
     if exp.note:
         lines += [exp.note, '']
     for coupling in exp.couplings:
         mine = verdicts(rows, stored, keep, coupling, prefix)
         lines += [f'### Coupling `{coupling}`', '']
         if exp.refine:
-            base = verdicts([r for r in stored if exp.study in ('both', r['study'])], stored, keep, coupling, prefix)
+            base = verdicts(
+                [r for r in stored if exp.study in ('both', r['study'])],
+                stored,
+                keep,
+                coupling,
+                prefix,
+            )
             refined = verdicts(fine, stored, keep, coupling, prefix)
-            lines += ['| finding | study (stored) | this reading | this reading, refined (192 el., 0.25 ms) |',
-                      '|---|---|---|---|']
+            lines += [
+                '| finding | study (stored) | this reading | this reading, refined (192 el., 0.25 '
+                'ms) |',
+                '|---|---|---|---|',
+            ]
             for (claim, _, ok0, d0), (_, _, ok, d), (_, _, okf, df) in zip(base, mine, refined):
-                lines.append(f'| {claim} | {"yes" if ok0 else "no"}: {d0} | {"yes" if ok else "no"}: {d} | '
-                             f'{"yes" if okf else "no"}: {df} |')
+                lines.append(
+                    f'| {claim} | {"yes" if ok0 else "no"}: {d0} | {"yes" if ok else "no"}: {d} | '
+                    f'{"yes" if okf else "no"}: {df} |'
+                )
         else:
             lines += ['| finding | reproduced | what the runs show |', '|---|---|---|']
             for claim, _, ok, detail in mine:
@@ -240,28 +329,40 @@ def section(key: str, exp: Experiment, specs: list[RunSpec], stored: list[dict])
     if exp.refine:
         by_name = {r['run']: r for r in stored}
         errors = [abs(r['peak_speed_m_s'] / f['peak_speed_m_s'] - 1.0) for r, f in zip(rows, fine)]
-        lines += ['### Runs and resolution', '',
-                  f'Peak speed of each run against the same run at twice the elements and half the step: largest '
-                  f'error {max(errors) * 100:.2f} %, median {sorted(errors)[len(errors) // 2] * 100:.2f} %; '
-                  f'{sum(e > study.CONVERGED for e in errors)} of {len(errors)} above {study.CONVERGED * 100:g} %. '
-                  'Edge radius: the smallest radius of the mantle\'s free edge over the run, over its radius at '
-                  'rest.', '',
-                  '| run | study peak (m/s) | peak (m/s) | refined peak (m/s) | error | peak thrust (N) '
-                  '| edge min / rest (mm) | ledger closure |', '|---|---|---|---|---|---|---|---|']
+        lines += [
+            '### Runs and resolution',
+            '',
+            'Peak speed of each run against the same run at twice the elements and half the step: '
+            f'largest error {max(errors) * 100:.2f} %, '
+            f'median {sorted(errors)[len(errors) // 2] * 100:.2f} %; '
+            f'{sum(e > study.CONVERGED for e in errors)} of {len(errors)} '
+            f'above {study.CONVERGED * 100:g} %. '
+            "Edge radius: the smallest radius of the mantle's free edge over the run, over its "
+            'radius at rest.',
+            '',
+            '| run | study peak (m/s) | peak (m/s) | refined peak (m/s) | error | peak thrust (N) '
+            '| edge min / rest (mm) | ledger closure |',
+            '|---|---|---|---|---|---|---|---|',
+        ]
         for r, f, e in zip(rows, fine, errors):
             base = by_name.get(r['run'])
-            lines.append(f'| {r["run"]} | {base["peak_speed_m_s"]:.4g} | {r["peak_speed_m_s"]:.4g} | '
-                         f'{f["peak_speed_m_s"]:.4g} | {e * 100:.2f} % | {r["peak_thrust_n"]:.3g} | '
-                         f'{r["edge_radius_min_m"] * 1e3:.2f} / {r["edge_radius_rest_m"] * 1e3:.2f} | '
-                         f'{r["closure_relative"]:.1e} |')
+            lines.append(
+                f'| {r["run"]} | {base["peak_speed_m_s"]:.4g} | {r["peak_speed_m_s"]:.4g} | '
+                f'{f["peak_speed_m_s"]:.4g} | {e * 100:.2f} % | {r["peak_thrust_n"]:.3g} | '
+                f'{r["edge_radius_min_m"] * 1e3:.2f} / {r["edge_radius_rest_m"] * 1e3:.2f} | '
+                f'{r["closure_relative"]:.1e} |'
+            )
         lines.append('')
         if finer:
             lines += ['Runs above 2 %, once more at 384 elements / 0.125 ms:', '']
             for i, f3 in finer.items():
                 f2 = fine[i]['peak_speed_m_s']
-                lines.append(f'- {rows[i]["run"]}: {rows[i]["peak_speed_m_s"]:.4g} (96 el.) / {f2:.4g} (192 el.) / '
-                             f'{f3["peak_speed_m_s"]:.4g} m/s (384 el.): the 192-element value is '
-                             f'{abs(f2 / f3["peak_speed_m_s"] - 1.0) * 100:.2f} % from the finest')
+                lines.append(
+                    f'- {rows[i]["run"]}: {rows[i]["peak_speed_m_s"]:.4g} (96 el.) / '
+                    f'{f2:.4g} (192 el.) / '
+                    f'{f3["peak_speed_m_s"]:.4g} m/s (384 el.): the 192-element value is '
+                    f'{abs(f2 / f3["peak_speed_m_s"] - 1.0) * 100:.2f} % from the finest'
+                )
             lines.append('')
     faults = [r for r in rows + fine + list(finer.values()) if r['fault']]
     lines += [f'Faults: {len(faults)}'] + [f'- {r["run"]}: {r["fault"]}' for r in faults] + ['']
@@ -269,7 +370,7 @@ def section(key: str, exp: Experiment, specs: list[RunSpec], stored: list[dict])
 
 
 def split_sections(text: str) -> tuple[str, dict[str, str]]:
-    """The preamble and the '## X. ...' sections of experiments.md, keyed by letter."""
+    """Split experiments.md into its preamble and its '## X. ...' sections, keyed by letter."""
     parts = text.split('\n## ')
     sections = {}
     for part in parts[1:]:
@@ -278,13 +379,18 @@ def split_sections(text: str) -> tuple[str, dict[str, str]]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--only', default='', help='comma-separated experiments: ' + ', '.join(EXPERIMENTS))
+    parser = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
+    parser.add_argument(
+        '--only', default='', help='comma-separated experiments: ' + ', '.join(EXPERIMENTS)
+    )
     args = parser.parse_args(argv)
     keys = [k for k in args.only.split(',') if k] or list(EXPERIMENTS)
     unknown = [k for k in keys if k not in EXPERIMENTS]
     if unknown:
-        parser.error(f'--only: unknown experiment(s) {", ".join(unknown)}; allowed: {", ".join(EXPERIMENTS)}')
+        parser.error(
+            f'--only: unknown experiment(s) {", ".join(unknown)}; '
+            f'allowed: {", ".join(EXPERIMENTS)}'
+        )
     _, specs = load_sweep(study.SWEEP)
     stored = study.read_table(study.OUT / 'study.csv')
     path = study.OUT / 'experiments.md'
@@ -292,13 +398,17 @@ def main(argv=None) -> int:
     new = {EXPERIMENTS[k].letter: section(k, EXPERIMENTS[k], specs, stored) for k in keys}
     if len(keys) == len(EXPERIMENTS) or not path.exists():
         now = f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}'
-        preamble = (f'# Paper 000 study: experiments on the readings\n\nAll experiments: {now}, {platform.machine()}, '
-                    f'{os.cpu_count()} cores, Python {platform.python_version()}; command '
-                    f'`.venv/bin/python benchmarks/paper000_experiments.py`, {time.perf_counter() - start:.0f} s wall '
-                    '(an experiment rerun alone with `--only` states its own run in its section).\n\n'
-                    'Each experiment changes one reading and keeps every other value of '
-                    '`config/sweeps/paper000_study.yaml`; the finding rules are the study\'s. Not the study: its '
-                    'values stay as chosen.\n')
+        preamble = (
+            '# Paper 000 study: experiments on the readings\n\n'
+            f'All experiments: {now}, {platform.machine()}, '
+            f'{os.cpu_count()} cores, Python {platform.python_version()}; command '
+            '`.venv/bin/python benchmarks/paper000_experiments.py`, '
+            f'{time.perf_counter() - start:.0f} s wall '
+            '(an experiment rerun alone with `--only` states its own run in its section).\n\n'
+            'Each experiment changes one reading and keeps every other value of '
+            "`config/sweeps/paper000_study.yaml`; the finding rules are the study's. "
+            'Not the study: its values stay as chosen.\n'
+        )
         sections = {}
     else:
         preamble, sections = split_sections(path.read_text())

@@ -1,11 +1,14 @@
-"""Run the property tests' generators at a larger example count and write the reliability table of
-docs/RELIABILITY.md (inputs tried, faults injected, survived, data lost), with date, machine and
-command.
+"""
+Run the property tests' generators at a larger example count; write the reliability table.
 
-    .venv/bin/python benchmarks/reliability_table.py [--examples N] [--kills K] [--out docs/RELIABILITY.md]
+The table of docs/RELIABILITY.md (inputs tried, faults injected, survived, data lost), with date,
+machine and command.
 
-The generators and checks are the ones of test/test_fuzz_inputs.py, test/test_mcap_corruption.py and
-test/test_repair.py (imported from there, so the table and `make test` exercise the same code);
+    .venv/bin/python benchmarks/reliability_table.py [--examples N] [--kills K]
+                                                     [--out docs/RELIABILITY.md]
+
+The generators and checks are the ones of test/test_fuzz_inputs.py, test/test_mcap_corruption.py
+and test/test_repair.py (imported from there, so the table and `make test` exercise the same code);
 here every example runs to the end and its outcome is counted instead of stopping at the first
 failure. "Survived" = the property held: a clear error naming what is wrong, or a run / the
 readable part of the file, and no traceback, hang or non-finite value.
@@ -36,6 +39,7 @@ MARKER_END = '<!-- reliability-table:end -->'
 
 
 class Tally:
+
     def __init__(self) -> None:
         self.outcomes: collections.Counter = collections.Counter()
         self.failures: list[str] = []
@@ -231,7 +235,8 @@ def machine() -> str:
     except OSError:
         pass
     return (
-        f'{platform.node()}: {cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, '
+        f'{platform.node()}: {cpu}, {os.cpu_count()} cores, '
+        f'{platform.system()} {platform.release()}, '
         f'Python {platform.python_version()}'
     )
 
@@ -241,7 +246,7 @@ def fmt_outcomes(t: Tally) -> str:
 
 
 def _stored(name: str):
-    """The JSON a live run stored in benchmarks/results (None if it was not run)."""
+    """Return the JSON a live run stored in benchmarks/results (None if it was not run)."""
     import json
 
     path = REPO / 'benchmarks' / 'results' / f'{name}.json'
@@ -249,7 +254,11 @@ def _stored(name: str):
 
 
 def live_fuzz_row() -> tuple:
-    """From benchmarks/live_fuzz.py's stored run (not rerun here: it takes minutes of wall time)."""
+    """
+    Return the live fuzz row from benchmarks/live_fuzz.py's stored run.
+
+    Not rerun here: it takes minutes of wall time.
+    """
     what = 'live fuzz of sim_node topics, services and parameters (`benchmarks/live_fuzz.py`)'
     stored = _stored('live_fuzz')
     if stored is None:
@@ -266,13 +275,15 @@ def live_fuzz_row() -> tuple:
     return (
         what + f"; `{stored['command']}`",
         f'{sent} commands + {calls} service/parameter calls in {seconds / 60:.0f} min',
-        f"scenes {', '.join(r['scene'] for r in runs)} at >= {min(r['rate_hz'] for r in runs):.0f} messages/s: "
-        'NaN, inf, 1e308, negative values, unknown names, stamps out of order, duplicates, random pause/step/'
-        'reset, live parameter changes',
-        f"{len(runs) - bad}/{len(runs)} runs: {sum(r['nan_published'] for r in runs)} non-finite values "
-        f"published, {sum(r['restarts_needed'] for r in runs)} restarts, "
+        f"scenes {', '.join(r['scene'] for r in runs)} at >= "
+        f"{min(r['rate_hz'] for r in runs):.0f} messages/s: "
+        'NaN, inf, 1e308, negative values, unknown names, stamps out of order, duplicates, '
+        'random pause/step/reset, live parameter changes',
+        f"{len(runs) - bad}/{len(runs)} runs: {sum(r['nan_published'] for r in runs)} "
+        f"non-finite values published, {sum(r['restarts_needed'] for r in runs)} restarts, "
         f'RSS {rss}',
-        'none (commands past the subscription depth are superseded by later ones; see live_fuzz.md)',
+        'none (commands past the subscription depth are superseded by later ones; '
+        'see live_fuzz.md)',
     )
 
 
@@ -291,7 +302,8 @@ def soak_row() -> tuple:
         'load of a closed loop at 1 kHz; parameter dump rounds throughout',
         ('met' if not stored['misses'] else 'MISSED: ' + '; '.join(stored['misses']))
         + f": RTF {r['rtf']:.4f}, watchdog trips {r['watchdog_trips']}, memory {growth}, "
-        f"parameter rounds {r['param_services']['rounds']} (max {r['param_services']['max_ms']:.0f} ms)",
+        f"parameter rounds {r['param_services']['rounds']} "
+        f"(max {r['param_services']['max_ms']:.0f} ms)",
         rec.get('error')
         or (
             f"none: {sum(rec.get('messages', {}).values())} messages read back with rosbags"
@@ -313,15 +325,16 @@ def table(examples: int, kills: int) -> str:
         wall = time.perf_counter() - started
     rows = [
         (
-            'scene files (valid and mutated: wrong types, NaN/inf/1e308, missing and unknown keys, '
-            'non-mapping sections, not-a-mapping or invalid YAML)',
+            'scene files (valid and mutated: wrong types, NaN/inf/1e308, missing and unknown '
+            'keys, non-mapping sections, not-a-mapping or invalid YAML)',
             scenes.tried,
             f'0-3 mutations per file; outcomes: {fmt_outcomes(scenes)}',
             f'{scenes.survived}/{scenes.tried}',
             'n/a',
         ),
         (
-            'command sequences into Simulation (any float, NaN, +-inf, 1e308, negative, subnormal)',
+            'command sequences into Simulation '
+            '(any float, NaN, +-inf, 1e308, negative, subnormal)',
             commands.tried,
             f'{int(commands.extra.get("applied", 0))} commands applied, '
             f'{int(commands.extra.get("rejected", 0))} rejected; runs: {fmt_outcomes(commands)}',
@@ -358,7 +371,8 @@ def table(examples: int, kills: int) -> str:
                 t.tried,
                 f'outcomes: {fmt_outcomes(t)}',
                 f'{t.survived}/{t.tried}',
-                f'median {t.extra["median_lost"]:.1%}, max {t.extra["max_lost"]:.0%} of the messages; '
+                f'median {t.extra["median_lost"]:.1%}, max {t.extra["max_lost"]:.0%} '
+                'of the messages; '
                 'never a message that was not recorded',
             )
         )
@@ -392,8 +406,10 @@ def table(examples: int, kills: int) -> str:
     ]
     lines = [
         MARKER_START,
-        f'Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC} on {machine()} by',
-        f'`{Path(sys.executable).name} benchmarks/reliability_table.py --examples {examples} --kills {kills}` '
+        f'Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC} '
+        f'on {machine()} by',
+        f'`{Path(sys.executable).name} benchmarks/reliability_table.py '
+        f'--examples {examples} --kills {kills}` '
         f'({wall:.0f} s).',
         '',
         '| inputs | tried | faults injected | survived | data lost |',

@@ -1,4 +1,5 @@
-"""Soak: sim_node publishing at 1 kHz in real time with a closed-loop controller, for minutes.
+"""
+Soak: sim_node publishing at 1 kHz in real time with a closed-loop controller, for minutes.
 
     .venv/bin/python benchmarks/soak.py [--minutes 10] [--rate-hz 1000] [--scene pump_cycle]
                                         [--record] [--no-write]
@@ -31,7 +32,11 @@ import sys
 import tempfile
 import time
 
-from live_common import (
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import bench_common  # noqa: E402
+from live_common import (  # noqa: E402
     cpu_seconds,
     default_domain_id,
     LiveClient,
@@ -41,13 +46,9 @@ from live_common import (
     percentile,
     rss_bytes,
 )
-from pulsejet_sim import interface
+from pulsejet_sim import interface  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-import bench_common  # noqa: E402
-
-WARM_UP_S = float(__import__("os").environ.get("SOAK_WARM_UP_S", 60.0))
+WARM_UP_S = float(__import__('os').environ.get('SOAK_WARM_UP_S', 60.0))
 RSS_PERIOD_S = 10.0
 RTF_TOLERANCE = 0.01
 RSS_GROWTH_LIMIT = 0.05
@@ -59,7 +60,11 @@ RECORDED_TOPICS = [
 
 
 def rtf_over(clock: list, t0_wall: float, t1_wall: float) -> float:
-    """Simulated seconds per wall second between the first /clock at or after t0 and the last before t1."""
+    """
+    Return the simulated seconds per wall second between t0 and t1.
+
+    Between the first /clock at or after t0 and the last before t1.
+    """
     inside = [(w, s) for w, s in clock if t0_wall <= w <= t1_wall]
     if len(inside) < 2:
         return float('nan')
@@ -125,7 +130,8 @@ def soak(minutes: float, rate_hz: float, scene: str, record: bool, domain: int, 
             for name, p in procs.items():
                 if not p.alive():
                     raise RuntimeError(
-                        f'{name} exited with {p.proc.returncode} during the soak:\n{p.output()[-2000:]}'
+                        f'{name} exited with {p.proc.returncode} during the soak:\n'
+                        f'{p.output()[-2000:]}'
                     )
         wall = time.monotonic() - start
         cpu = {name: (cpu_seconds(p.pid) - cpu0[name]) / wall for name, p in procs.items()}
@@ -241,7 +247,8 @@ def table(r: dict) -> str:
         ('physics fault; ERROR diagnostics', f"{r['faults']}; {r['error_diagnostics']}"),
         (
             'parameter dump rounds (list + get): p50 / p99 / max; slower than 10 s',
-            f"{p['rounds']}: {p['p50_ms']:.1f} / {p['p99_ms']:.1f} / {p['max_ms']:.1f} ms; {p['starved']}",
+            f"{p['rounds']}: {p['p50_ms']:.1f} / {p['p99_ms']:.1f} / {p['max_ms']:.1f} ms; "
+            f"{p['starved']}",
         ),
     ]
     for name, (g, first, last, peak) in r['rss'].items():

@@ -1,4 +1,7 @@
-"""Geometrically exact axisymmetric (Reissner) shell model of the mantle, coupled to a jet (paper 000).
+"""
+Geometrically exact axisymmetric (Reissner) shell model of the mantle (paper 000).
+
+The mantle is coupled to a jet.
 
 Model
 -----
@@ -19,7 +22,8 @@ Fluid added mass acts along the surface normal: ``m_a,i = C_a rho l_a A_i`` alon
 *reference* normal ``n0_i`` (l_a = ``fluid.added_mass_length_m``, default half the largest
 radius, i.e. the 2-D added mass per unit area ``rho a/2`` of a cylinder of radius a, times
 C_a = 1.1).  Using the reference normal keeps the mass matrix constant and the added-mass force
-conservative (kinetic energy ``1/2 m_a (n0 . v)^2``); it is approximate when the wall rotates a lot.
+conservative (kinetic energy ``1/2 m_a (n0 . v)^2``); it is approximate when the wall rotates a
+lot.
 
 *Frames.*  Positions are relative to the body; the axial node velocity is stored absolute
 (``w = z_dot + U``), which makes the mass matrix block diagonal.  The shell therefore feels the
@@ -38,24 +42,27 @@ pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell:
 ``-1/2 rho C_t A_i |v_t| v_t`` along the current tangent.
 
 *Couplings* (scene key ``coupling``; docs/PHYSICS_SHELL.md has the citations).  ``consistent``
-(default): as described above.  ``paper``: paper 000's scheme (its coupling of Fig. 5): the shell is
-solved in the body frame (its drag and added mass see only its own motion relative to the body),
+(default): as described above.  ``paper``: paper 000's scheme (its coupling of Fig. 5): the shell
+is solved in the body frame (its drag and added mass see only its own motion relative to the body),
 the water loads the wall only through drag and added mass (no cavity pressure), and the vehicle
 ``(M + m_x + rho V) U' = T - D - ram`` is driven by the thrust of the shell's volume rate; the
 vehicle velocity enters only the position update.  Its ledger books the jet's kinetic energy flux
-``1/2 rho A |u_j|^3``, which no wall force pays for in that scheme, as ``created_unpaid_jet_kinetic``.
+``1/2 rho A |u_j|^3``, which no wall force pays for in that scheme, as
+``created_unpaid_jet_kinetic``.
 ``jet.outlet``: ``ring`` (a fixed outlet of ``outlet_radius_m`` in the clamped ring; the consistent
 default), ``edge`` (the paper default: the mantle's free edge is the nozzle, radius and angle free
-at that edge, ``A_out = pi r_edge(t)^2``) or ``free_edge_fixed_nozzle`` (the edge free as with ``edge``,
-but the jet leaves through a fixed nozzle of ``outlet_radius_m``, ``A_out = pi r_n^2``: the authors'
-later code, ``Area_out = pi*Rn.^2`` with ``Rn = 12.5e-3``, whose exit area does not follow the shell).
-``paper_code`` (experiment E, the authors' public code as written; citations in docs/PHYSICS_SHELL.md,
-"Experiment E"): the pole is clamped to the body and the edge is free in r, z and theta; fixed nozzle
-(``free_edge_fixed_nozzle``, default radius 12.5 mm); no cavity pressure and no tangential drag on the
-wall; thrust, a refilling force ``-C_f rho V'^2/A_in`` and the body drag act on the wall as a uniform
-axial load per reference area and reach the vehicle through the pole's reaction; added mass ``C_a``
-times the node's own mass in r and z; the consistent coupling's frame (the shell's inertia sees the
-vehicle's acceleration).  Its ledger books ``created_unpaid_jet_kinetic`` and ``created_wall_loads``.
+at that edge, ``A_out = pi r_edge(t)^2``) or ``free_edge_fixed_nozzle`` (the edge free as with
+``edge``, but the jet leaves through a fixed nozzle of ``outlet_radius_m``, ``A_out = pi r_n^2``:
+the authors' later code, ``Area_out = pi*Rn.^2`` with ``Rn = 12.5e-3``, whose exit area does not
+follow the shell).
+``paper_code`` (experiment E, the authors' public code as written; citations in
+docs/PHYSICS_SHELL.md, "Experiment E"): the pole is clamped to the body and the edge is free in r,
+z and theta; fixed nozzle (``free_edge_fixed_nozzle``, default radius 12.5 mm); no cavity pressure
+and no tangential drag on the wall; thrust, a refilling force ``-C_f rho V'^2/A_in`` and the body
+drag act on the wall as a uniform axial load per reference area and reach the vehicle through the
+pole's reaction; added mass ``C_a`` times the node's own mass in r and z; the consistent coupling's
+frame (the shell's inertia sees the vehicle's acceleration).  Its ledger books
+``created_unpaid_jet_kinetic`` and ``created_wall_loads``.
 
 *Energy ledger.*  Stored: elastic, shell + payload kinetic ("vehicle"), added-mass kinetic
 ("outer fluid"), ``1/2 rho V U^2`` ("internal").  In: actuation work (cable force times wall
@@ -104,8 +111,8 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
                  thrust_coefficient: 1}
     vehicle:    {mass_kg (shell + payload), added_mass_kg: 0, initial_velocity_m_s: 0}
     actuation:  {kind: none|cable|muscle, source: routine|command (cable only),
-                 amplitude (cable: peak total radial pull, N; muscle: fractional drop of the desired
-                 hoop radius, 0..0.95), distribution: uniform|rising|falling (cable),
+                 amplitude (cable: peak total radial pull, N; muscle: fractional drop of the
+                 desired hoop radius, 0..0.95), distribution: uniform|rising|falling (cable),
                  taper_fraction: 0.15, desired_radius: proportional|constant_depth|
                  constant_depth_to_edge (muscle),
                  frequency_hz, contraction_s, release_s, start_delay_s,
@@ -123,24 +130,40 @@ The cable routine: activation ``a(t)`` rises as a half cosine over ``contraction
 distributed over the free nodes with weights uniform, proportional to X/L (``rising``: largest
 at the ring) or to 1 - X/L (``falling``: largest at the pole).  The muscle routine lowers the
 desired hoop stretch to ``tau_d = 1 - amplitude a(t) s(X)`` (``s`` = 1 with smooth tapers at the
-ends, at the pole only for ``constant_depth_to_edge``); the work it does is ``dW/dt`` at fixed shape.
+ends, at the pole only for ``constant_depth_to_edge``); the work it does is ``dW/dt`` at fixed
+shape.
 """
+
 from __future__ import annotations
 
 import math
 from typing import Any, Mapping
 
 import numpy as np
-
 from pulsejet_sim.models import shell_kernels as sk
 from pulsejet_sim.models.base import Command, ModelError, Observation, SimulationBlowUp
-from pulsejet_sim.models.shell_geometry import GEOMETRY_KINDS, Profile, build_profile
+from pulsejet_sim.models.shell_geometry import build_profile, GEOMETRY_KINDS, Profile
 from pulsejet_sim.schema import show
 
 _KERNELS: dict = {}
 INTEGRATORS = {'verlet': (0, 1.0), 'implicit_midpoint': (1, 0.5), 'backward_euler': (1, 1.0)}
-SECTIONS = ('model', 'name', 'description', 'coupling', 'simulation', 'geometry', 'mesh', 'material', 'fluid',
-            'vehicle', 'jet', 'actuation', 'terms', 'initial', 'load')
+SECTIONS = (
+    'model',
+    'name',
+    'description',
+    'coupling',
+    'simulation',
+    'geometry',
+    'mesh',
+    'material',
+    'fluid',
+    'vehicle',
+    'jet',
+    'actuation',
+    'terms',
+    'initial',
+    'load',
+)
 TERMS = {'viscosity': True, 'drag': True, 'added_mass': True, 'jet': True, 'vehicle_motion': True}
 ACTUATION_KINDS = ('none', 'cable', 'muscle')
 DISTRIBUTIONS = ('uniform', 'rising', 'falling')
@@ -149,10 +172,11 @@ OUTLETS = ('ring', 'edge', 'free_edge_fixed_nozzle')
 DESIRED_RADIUS = ('proportional', 'constant_depth', 'constant_depth_to_edge')
 ERR_TEXT = {
     sk.ERR_NONFINITE: 'non-finite state (NaN/inf)',
-    sk.ERR_AXIS: 'the mantle wall crossed the symmetry axis (r < 0): the collapse is too deep for this '
-                 'shell; reduce the actuation amplitude',
+    sk.ERR_AXIS: 'the mantle wall crossed the symmetry axis (r < 0): the collapse is too deep for '
+    'this shell; reduce the actuation amplitude',
     sk.ERR_BOUNDS: 'state out of bounds (a node or its speed ran away)',
-    sk.ERR_NEWTON: 'the implicit Newton solve did not converge even with 64 sub-steps; use a smaller dt_s',
+    sk.ERR_NEWTON: 'the implicit Newton solve did not converge even with 64 sub-steps; '
+    'use a smaller dt_s',
 }
 
 
@@ -160,7 +184,9 @@ def _section(scene, key, required=True):
     sec = scene.get(key)
     if sec is None:
         if required:
-            raise ModelError(f'{key}: missing section; allowed: a mapping (see config/shell_robot.yaml)')
+            raise ModelError(
+                f'{key}: missing section; allowed: a mapping (see config/shell_robot.yaml)'
+            )
         return {}
     if not isinstance(sec, Mapping):
         raise ModelError(f'{key}: {show(sec)} is not a mapping; allowed: a mapping of parameters')
@@ -170,56 +196,79 @@ def _section(scene, key, required=True):
 def _num(sec, key, where, low, high, default=None, low_open=False):
     if key not in sec:
         if default is None:
-            raise ModelError(f'{where}.{key}: missing; allowed: a number in {"(" if low_open else "["}{low}, {high}]')
+            raise ModelError(
+                f'{where}.{key}: missing; allowed: a number in '
+                f'{"(" if low_open else "["}{low}, {high}]'
+            )
         return float(default)
     value = sec[key]
     if isinstance(value, bool):
-        raise ModelError(f'{where}.{key}: {show(value)} is not a number; allowed: a number in [{low}, {high}]')
+        raise ModelError(
+            f'{where}.{key}: {show(value)} is not a number; allowed: a number in [{low}, {high}]'
+        )
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ModelError(f'{where}.{key}: {show(value)} is not a number; allowed: a number in [{low}, {high}]') from None
+        raise ModelError(
+            f'{where}.{key}: {show(value)} is not a number; allowed: a number in [{low}, {high}]'
+        ) from None
     if not math.isfinite(v) or v < low or v > high or (low_open and v == low):
-        raise ModelError(f'{where}.{key}: {show(value)} is out of range; allowed: a number in '
-                         f'{"(" if low_open else "["}{low}, {high}]')
+        raise ModelError(
+            f'{where}.{key}: {show(value)} is out of range; allowed: a number in '
+            f'{"(" if low_open else "["}{low}, {high}]'
+        )
     return v
 
 
 def _choice(sec, key, where, allowed, default):
     value = sec.get(key, default)
     if value not in allowed:
-        raise ModelError(f'{where}.{key}: {show(value)} is not known; allowed: one of {", ".join(map(str, allowed))}')
+        raise ModelError(
+            f'{where}.{key}: {show(value)} is not known; '
+            f'allowed: one of {", ".join(map(str, allowed))}'
+        )
     return value
 
 
 def _unknown(sec, where, allowed):
     for k in sec:
         if k not in allowed:
-            raise ModelError(f'{where}.{show(k) if not isinstance(k, str) else k[:60]}: unknown key (value {show(sec[k])}); allowed: {", ".join(allowed)}')
+            raise ModelError(
+                f'{where}.{show(k) if not isinstance(k, str) else k[:60]}: unknown key '
+                f'(value {show(sec[k])}); allowed: {", ".join(allowed)}'
+            )
 
 
-def muscle_shape(desired: str, Xm: np.ndarray, r0m: np.ndarray, taper: float, amp: float) -> np.ndarray:
-    """Per element, the drop of the desired hoop stretch at full activation over ``amp``:
+def muscle_shape(
+    desired: str, Xm: np.ndarray, r0m: np.ndarray, taper: float, amp: float
+) -> np.ndarray:
+    """
+    Return, per element, the drop of the desired hoop stretch at full activation over ``amp``.
+
     ``tau_d = 1 - amp a(t) s_e``.
 
     ``proportional``: the desired radius is ``(1 - amp a s(X)) r0``, a uniform fraction of the rest
-    radius.  ``constant_depth`` (our reading of paper 000's Fig. 12, whose curves are lost: "the desired
-    radius function is linear (constant) for most of the mantle profile and thus more attuned with the
-    linear conical profile"): the desired radius is the rest profile moved inwards by the same depth
-    ``amp a(t) max(r0) s(X)`` everywhere, so on a cone it is again a straight line parallel to the wall,
-    and on an ellipsoid it is the ellipse moved inwards; the hoop strain it asks for is then largest
-    where the mantle is narrow, capped at a desired stretch of 0.05.  ``s(X)`` is 1 over the mantle
-    and falls smoothly to 0 over ``taper`` of the meridian at the pole and at the edge.
+    radius.  ``constant_depth`` (our reading of paper 000's Fig. 12, whose curves are lost: "the
+    desired radius function is linear (constant) for most of the mantle profile and thus more
+    attuned with the linear conical profile"): the desired radius is the rest profile moved inwards
+    by the same depth ``amp a(t) max(r0) s(X)`` everywhere, so on a cone it is again a straight
+    line parallel to the wall, and on an ellipsoid it is the ellipse moved inwards; the hoop strain
+    it asks for is then largest where the mantle is narrow, capped at a desired stretch of 0.05.
+    ``s(X)`` is 1 over the mantle and falls smoothly to 0 over ``taper`` of the meridian at the
+    pole and at the edge.
 
-    ``constant_depth_to_edge`` (a third reading of Fig. 12, run as an experiment): ``constant_depth``
-    held up to the free edge, tapered at the pole only.  Section 5.2 says the function is "linear
-    (constant) for most of the mantle profile", and the muscles are "a network of circular muscles
-    symmetrically arranged all around the body" (introduction): the part of the profile where the
-    function is not linear is read as the pole (the cone's rounded tip, where a constant depth cannot
-    hold), not the edge, so the muscle narrows the nozzle too."""
+    ``constant_depth_to_edge`` (a third reading of Fig. 12, run as an experiment):
+    ``constant_depth`` held up to the free edge, tapered at the pole only.  Section 5.2 says the
+    function is "linear (constant) for most of the mantle profile", and the muscles are "a network
+    of circular muscles symmetrically arranged all around the body" (introduction): the part of the
+    profile where the function is not linear is read as the pole (the cone's rounded tip, where a
+    constant depth cannot hold), not the edge, so the muscle narrows the nozzle too.
+    """
+
     def smooth(x):
         x = np.clip(x, 0.0, 1.0)
         return x * x * (3 - 2 * x)
+
     if desired == 'constant_depth_to_edge':
         s = smooth(Xm / taper)
     else:
@@ -234,14 +283,29 @@ class ShellModel:
     """Axisymmetric Reissner shell mantle + jet + vehicle (implements the Model protocol)."""
 
     name = 'shell'
-    code_rim = 0            # paper_code: the node of the clamped rim around the pole
+    code_rim = 0  # paper_code: the node of the clamped rim around the pole
     isotropic_added_mass = False
 
-    def __init__(self, *, profile: Profile, dt_s: float, integrator: str, flags: int, P: np.ndarray,
-                 E: np.ndarray, Nd: np.ndarray, node_mass: np.ndarray, node_added_mass: np.ndarray,
-                 n0: np.ndarray, payload_kg: float, body_added_mass_kg: float, actuation: dict,
-                 initial_perturbation_m: float = 0.0, initial_velocity_m_s: float = 0.0,
-                 duration_s: float | None = None):
+    def __init__(
+        self,
+        *,
+        profile: Profile,
+        dt_s: float,
+        integrator: str,
+        flags: int,
+        P: np.ndarray,
+        E: np.ndarray,
+        Nd: np.ndarray,
+        node_mass: np.ndarray,
+        node_added_mass: np.ndarray,
+        n0: np.ndarray,
+        payload_kg: float,
+        body_added_mass_kg: float,
+        actuation: dict,
+        initial_perturbation_m: float = 0.0,
+        initial_velocity_m_s: float = 0.0,
+        duration_s: float | None = None,
+    ):
         self.ref = profile
         self.dt_s = float(dt_s)
         self.integrator = integrator
@@ -275,32 +339,47 @@ class ShellModel:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_scene(cls, scene: Mapping[str, Any]) -> 'ShellModel':
-        """Build from a parsed scene dict (schema: config/shell_robot.yaml).  Raises ModelError
-        naming the key, the bad value and what is allowed."""
+        """
+        Build from a parsed scene dict (schema: config/shell_robot.yaml).
+
+        Raises ModelError naming the key, the bad value and what is allowed.
+        """
         if not isinstance(scene, Mapping):
             raise ModelError(f'scene: {scene!r} is not a mapping')
         for k in scene:
             if k not in SECTIONS:
-                raise ModelError(f'{k}: unknown section for the shell model (value {scene[k]!r}); allowed: '
-                                 f'{", ".join(SECTIONS)}')
+                raise ModelError(
+                    f'{k}: unknown section for the shell model (value {scene[k]!r}); allowed: '
+                    f'{", ".join(SECTIONS)}'
+                )
         if scene.get('model', 'shell') != 'shell':
-            raise ModelError(f'model: {scene.get("model")!r} is not the shell model; allowed: shell')
+            raise ModelError(
+                f'model: {scene.get("model")!r} is not the shell model; allowed: shell'
+            )
         coupling = scene.get('coupling', 'consistent')
         if coupling not in COUPLINGS:
-            raise ModelError(f'coupling: {coupling!r} is not known; allowed: one of {", ".join(COUPLINGS)}')
+            raise ModelError(
+                f'coupling: {coupling!r} is not known; allowed: one of {", ".join(COUPLINGS)}'
+            )
         paper = coupling == 'paper'
         code = coupling == 'paper_code'
         sim = _section(scene, 'simulation')
         dt = _num(sim, 'dt_s', 'simulation', 0.0, 0.1, low_open=True)
-        integrator = _choice(sim, 'integrator', 'simulation', tuple(INTEGRATORS), 'implicit_midpoint')
+        integrator = _choice(
+            sim, 'integrator', 'simulation', tuple(INTEGRATORS), 'implicit_midpoint'
+        )
         if (paper or code) and integrator == 'verlet':
-            raise ModelError(f"simulation.integrator: 'verlet' is not available with coupling: {coupling}; allowed: "
-                             "implicit_midpoint or backward_euler")
+            raise ModelError(
+                f"simulation.integrator: 'verlet' is not available with coupling: {coupling}; "
+                'allowed: implicit_midpoint or backward_euler'
+            )
         duration = _num(sim, 'duration_s', 'simulation', 0.0, 1e6, default=10.0)
         tol = _num(sim, 'newton_tolerance', 'simulation', 1e-14, 1e-4, default=1e-9)
         spec = sim.get('specialise_kernel', False)
         if not isinstance(spec, bool):
-            raise ModelError(f'simulation.specialise_kernel: {spec!r} is not a boolean; allowed: true or false')
+            raise ModelError(
+                f'simulation.specialise_kernel: {spec!r} is not a boolean; allowed: true or false'
+            )
 
         mesh = _section(scene, 'mesh')
         _unknown(mesh, 'mesh', ('elements',))
@@ -309,12 +388,25 @@ class ShellModel:
             raise ModelError(f'mesh.elements: {ne!r} rejected; allowed: an integer in [4, 400]')
 
         geo = _section(scene, 'geometry')
-        _choice(geo, 'kind', 'geometry', GEOMETRY_KINDS, None)   # before build_profile: a list is unhashable there
+        _choice(
+            geo, 'kind', 'geometry', GEOMETRY_KINDS, None
+        )  # before build_profile: a list is unhashable there
         profile = build_profile(geo, ne)
 
         mat = _section(scene, 'material')
-        _unknown(mat, 'material', ('youngs_modulus_pa', 'viscosity_pa_s', 'poisson_ratio', 'half_thickness_m',
-                                   'density_kg_m3', 'shear_correction', 'rotary_inertia_scale'))
+        _unknown(
+            mat,
+            'material',
+            (
+                'youngs_modulus_pa',
+                'viscosity_pa_s',
+                'poisson_ratio',
+                'half_thickness_m',
+                'density_kg_m3',
+                'shear_correction',
+                'rotary_inertia_scale',
+            ),
+        )
         Ey = _num(mat, 'youngs_modulus_pa', 'material', 10.0, 1e10)
         eta_v = _num(mat, 'viscosity_pa_s', 'material', 0.0, 1e7)
         nu = _num(mat, 'poisson_ratio', 'material', 0.0, 0.49)
@@ -324,8 +416,11 @@ class ShellModel:
         rot = _num(mat, 'rotary_inertia_scale', 'material', 1.0, 1e6, default=1.0)
         rmax0 = float(profile.r0.max())
         if h > 0.25 * rmax0:
-            raise ModelError(f'material.half_thickness_m: {h!r} m is not thin against the mantle radius {rmax0:.4g} m; '
-                             f'allowed: half_thickness_m <= {0.25 * rmax0:.4g} m')
+            raise ModelError(
+                f'material.half_thickness_m: {h!r} m is not thin against the mantle radius '
+                f'{rmax0:.4g} m; '
+                f'allowed: half_thickness_m <= {0.25 * rmax0:.4g} m'
+            )
 
         terms_sec = _section(scene, 'terms', required=False)
         _unknown(terms_sec, 'terms', tuple(TERMS))
@@ -336,8 +431,17 @@ class ShellModel:
             terms[k] = v
 
         fl = _section(scene, 'fluid')
-        _unknown(fl, 'fluid', ('density_kg_m3', 'added_mass_coefficient', 'added_mass_length_m',
-                               'tangential_drag_coefficient', 'drag_coefficient'))
+        _unknown(
+            fl,
+            'fluid',
+            (
+                'density_kg_m3',
+                'added_mass_coefficient',
+                'added_mass_length_m',
+                'tangential_drag_coefficient',
+                'drag_coefficient',
+            ),
+        )
         rho = _num(fl, 'density_kg_m3', 'fluid', 1.0, 20000.0)
         Ca = _num(fl, 'added_mass_coefficient', 'fluid', 0.0, 10.0, default=1.1)
         la = _num(fl, 'added_mass_length_m', 'fluid', 0.0, 10.0, default=0.5 * rmax0)
@@ -346,21 +450,42 @@ class ShellModel:
 
         jet = _section(scene, 'jet', required=terms['jet'])
         _unknown(jet, 'jet', ('outlet', 'outlet_radius_m', 'inlet_area_m2', 'thrust_coefficient'))
-        outlet = _choice(jet, 'outlet', 'jet', OUTLETS, 'free_edge_fixed_nozzle' if code else 'edge' if paper else 'ring')
+        outlet = _choice(
+            jet,
+            'outlet',
+            'jet',
+            OUTLETS,
+            'free_edge_fixed_nozzle' if code else 'edge' if paper else 'ring',
+        )
         rring = profile.ring_radius_m
         if code and outlet != 'free_edge_fixed_nozzle':
-            raise ModelError(f'jet.outlet: {outlet!r} is not available with coupling: paper_code (the authors\' code: '
-                             f'free open end, fixed nozzle Area_out = pi*Rn.^2); allowed: free_edge_fixed_nozzle')
+            raise ModelError(
+                f"jet.outlet: {outlet!r} is not available with coupling: paper_code (the authors' "
+                'code: free open end, fixed nozzle Area_out = pi*Rn.^2); '
+                'allowed: free_edge_fixed_nozzle'
+            )
         if outlet == 'edge':
             if 'outlet_radius_m' in jet:
-                raise ModelError(f'jet.outlet_radius_m: {jet["outlet_radius_m"]!r} is not used with outlet: edge '
-                                 f'(the outlet is the mantle edge, radius {rring:.4g} m at rest); allowed: leave it '
-                                 f'out, or outlet: ring')
+                raise ModelError(
+                    f'jet.outlet_radius_m: {jet["outlet_radius_m"]!r} is not used with outlet: '
+                    f'edge (the outlet is the mantle edge, radius {rring:.4g} m at rest); '
+                    'allowed: leave it out, or outlet: ring'
+                )
         free_edge = outlet in ('edge', 'free_edge_fixed_nozzle')
-        r_out = rring if outlet == 'edge' else _num(jet, 'outlet_radius_m', 'jet', 1e-4, rring,
-                                                    default=min(0.0125, rring) if code else 0.5 * rring)
-        A_out = math.pi * r_out ** 2
-        A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01 ** 2)
+        r_out = (
+            rring
+            if outlet == 'edge'
+            else _num(
+                jet,
+                'outlet_radius_m',
+                'jet',
+                1e-4,
+                rring,
+                default=min(0.0125, rring) if code else 0.5 * rring,
+            )
+        )
+        A_out = math.pi * r_out**2
+        A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01**2)
         Cf = _num(jet, 'thrust_coefficient', 'jet', 0.0, 2.0, default=1.0)
 
         veh = _section(scene, 'vehicle', required=False)
@@ -375,7 +500,9 @@ class ShellModel:
 
         init = _section(scene, 'initial', required=False)
         _unknown(init, 'initial', ('radial_perturbation_m',))
-        pert = _num(init, 'radial_perturbation_m', 'initial', -0.5 * rmax0, 0.5 * rmax0, default=0.0)
+        pert = _num(
+            init, 'radial_perturbation_m', 'initial', -0.5 * rmax0, 0.5 * rmax0, default=0.0
+        )
 
         # ---- elements (discrete reference values, see shell_kernels)
         X, r0, z0, th0 = profile.X, profile.r0, profile.z0, profile.theta0
@@ -426,8 +553,8 @@ class ShellModel:
         free = np.ones(n1, bool)
         free[0] = free[-1] = False
         if free_edge:
-            # our reading of paper 000 section 5.1 ("a shrinkage of the nozzle area"): the edge carries
-            # no prescribed radius or angle (zero wrench), only its axial place on the body
+            # our reading of paper 000 section 5.1 ("a shrinkage of the nozzle area"): the edge
+            # carries no prescribed radius or angle (zero wrench), only its axial place on the body
             Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXT] = 0.0
             # its axial place is the body's: no r-z coupling of the added mass at that node (the
             # residual would otherwise pull the vehicle speed held in the ring's axial slot into r)
@@ -436,24 +563,32 @@ class ShellModel:
         shell_free_mass = float(m[:-1].sum())
         code_rim = 0
         if code:
-            # the authors' code (octopus_driver.m, octopus_derivatives.m): the body holds X = 0, a hole whose
-            # wall is at alpha0 = pi/4 (sigmas_o = zeros(6,1)); the open end X = L carries no wrench
-            # ("condizioni su X=L"). Here the polar cap up to the first node whose wall is at pi/4 from
-            # the pole's is rigid, part of the body, its rim clamped; the edge is free in r, z and theta
+            # the authors' code (octopus_driver.m, octopus_derivatives.m): the body holds X = 0, a
+            # hole whose wall is at alpha0 = pi/4 (sigmas_o = zeros(6,1)); the open end X = L
+            # carries no wrench ("condizioni su X=L"). Here the polar cap up to the first node
+            # whose wall is at pi/4 from the pole's is rigid, part of the body, its rim clamped;
+            # the edge is free in r, z and theta
             code_rim = int(np.argmax(np.abs(th0 - th0[0]) >= math.pi / 4 - 1e-12))
             if code_rim <= 0 or code_rim >= ne - 1:
-                raise ModelError(f'coupling: paper_code needs a mantle whose wall turns by pi/4 from the pole '
-                                 f'before the edge (the clamped rim of the authors\' code); this geometry does not')
-            Nd[:code_rim + 1, sk.N_FIXR] = Nd[:code_rim + 1, sk.N_FIXZ] = Nd[:code_rim + 1, sk.N_FIXT] = 1.0
+                raise ModelError(
+                    'coupling: paper_code needs a mantle whose wall turns by pi/4 from the pole '
+                    "before the edge (the clamped rim of the authors' code); "
+                    'this geometry does not'
+                )
+            Nd[:code_rim + 1, sk.N_FIXR] = Nd[:code_rim + 1, sk.N_FIXZ] = \
+                Nd[:code_rim + 1, sk.N_FIXT] = 1.0
             Nd[-1, sk.N_FIXZ] = 0.0
-            free[:code_rim + 1] = False
+            free[: code_rim + 1] = False
             shell_free_mass = float(m[code_rim + 1:].sum())
 
         # ---- vehicle
         total = _num(veh, 'mass_kg', 'vehicle', 1e-6, 1e6, default=2.0 * shell_free_mass)
         if total <= shell_free_mass:
-            raise ModelError(f'vehicle.mass_kg: {total!r} kg is not more than the moving shell mass '
-                             f'{shell_free_mass:.4g} kg; allowed: mass_kg > {shell_free_mass:.4g} (shell plus payload)')
+            raise ModelError(
+                f'vehicle.mass_kg: {total!r} kg is not more than the moving shell mass '
+                f'{shell_free_mass:.4g} kg; allowed: mass_kg > {shell_free_mass:.4g} '
+                '(shell plus payload)'
+            )
         mx = _num(veh, 'added_mass_kg', 'vehicle', 0.0, 1e6, default=0.0)
         U0 = _num(veh, 'initial_velocity_m_s', 'vehicle', -100.0, 100.0, default=0.0)
         payload = total - shell_free_mass
@@ -478,12 +613,28 @@ class ShellModel:
         freq, tc, tr, delay = 1.0, 0.3, 0.3, 0.0
         actuation = {'kind': akind, 'source': 'none'}
         if akind != 'none':
-            common = ('kind', 'source', 'amplitude', 'frequency_hz', 'contraction_s', 'release_s', 'start_delay_s')
-            extra = (('distribution', 'max_cable_force_n') if akind == 'cable'
-                     else ('taper_fraction', 'desired_radius'))
+            common = (
+                'kind',
+                'source',
+                'amplitude',
+                'frequency_hz',
+                'contraction_s',
+                'release_s',
+                'start_delay_s',
+            )
+            extra = (
+                ('distribution', 'max_cable_force_n')
+                if akind == 'cable'
+                else ('taper_fraction', 'desired_radius')
+            )
             _unknown(act, 'actuation', common + extra)
-            src = _choice(act, 'source', 'actuation', ('routine', 'command') if akind == 'cable' else ('routine',),
-                          'routine')
+            src = _choice(
+                act,
+                'source',
+                'actuation',
+                ('routine', 'command') if akind == 'cable' else ('routine',),
+                'routine',
+            )
             actuation['source'] = src
             if akind == 'cable':
                 flags |= sk.F_CABLE
@@ -493,23 +644,36 @@ class ShellModel:
                 w = shape * free
                 if free_edge:
                     # the load is distributed along the meridian: a free end node carries half an
-                    # element's share (trapezoidal rule), interior nodes a whole one (equal elements)
+                    # element's share (trapezoidal rule), interior nodes a whole one (equal
+                    # elements)
                     w[-1] *= 0.5
                 if w.sum() <= 0:
-                    raise ModelError(f'actuation.distribution: {dist!r} loads no free node; allowed: uniform')
+                    raise ModelError(
+                        f'actuation.distribution: {dist!r} loads no free node; allowed: uniform'
+                    )
                 Nd[:, sk.N_WC] = w / w.sum()
                 actuation['distribution'] = dist
                 force_high = Command.LIMITS['cable_force_n'][1]
-                if src == 'routine' or 'amplitude' in act:   # a command-driven scene keeps its routine's
+                if (
+                    src == 'routine' or 'amplitude' in act
+                ):  # a command-driven scene keeps its routine's
                     amp = _num(act, 'amplitude', 'actuation', 0.0, force_high)
-                actuation['max_cable_force_n'] = _num(act, 'max_cable_force_n', 'actuation', 0.0, force_high,
-                                                      default=2.0 * amp if amp > 0 else force_high,
-                                                      low_open=True)
+                actuation['max_cable_force_n'] = _num(
+                    act,
+                    'max_cable_force_n',
+                    'actuation',
+                    0.0,
+                    force_high,
+                    default=2.0 * amp if amp > 0 else force_high,
+                    low_open=True,
+                )
             else:
                 flags |= sk.F_MUSCLE
                 amp = _num(act, 'amplitude', 'actuation', 0.0, 0.95)
                 taper = _num(act, 'taper_fraction', 'actuation', 0.01, 0.5, default=0.15)
-                desired = _choice(act, 'desired_radius', 'actuation', DESIRED_RADIUS, 'proportional')
+                desired = _choice(
+                    act, 'desired_radius', 'actuation', DESIRED_RADIUS, 'proportional'
+                )
                 E[:, sk.E_SMUS] = muscle_shape(desired, Xm, r0m, taper, amp)
                 actuation['taper_fraction'] = taper
                 actuation['desired_radius'] = desired
@@ -520,17 +684,25 @@ class ShellModel:
                 tc = _num(act, 'contraction_s', 'actuation', 0.0, per, low_open=True)
                 tr = _num(act, 'release_s', 'actuation', 0.0, per, low_open=True)
                 if tc + tr > per * (1 + 1e-12):
-                    raise ModelError(f'actuation.release_s: contraction_s + release_s = {tc + tr:.4g} s exceeds the '
-                                     f'period 1/frequency_hz = {per:.4g} s; allowed: contraction_s + release_s <= period')
+                    raise ModelError(
+                        'actuation.release_s: contraction_s + release_s = '
+                        f'{tc + tr:.4g} s exceeds the period 1/frequency_hz = {per:.4g} s; '
+                        'allowed: contraction_s + release_s <= period'
+                    )
                 delay = _num(act, 'start_delay_s', 'actuation', 0.0, 1e6, default=0.0)
-                actuation.update(amplitude=amp, frequency_hz=freq, contraction_s=tc, release_s=tr,
-                                 start_delay_s=delay)
+                actuation.update(
+                    amplitude=amp,
+                    frequency_hz=freq,
+                    contraction_s=tc,
+                    release_s=tr,
+                    start_delay_s=delay,
+                )
 
         # ---- parameters
         P = np.zeros(sk.N_PARAMS)
         G = Ey / (2 * (1 + nu))
-        P[sk.P_PSI] = 2 * Ey * h / (1 - nu ** 2)
-        P[sk.P_PSI2] = 6 * eta_v * h / (1 - nu ** 2)
+        P[sk.P_PSI] = 2 * Ey * h / (1 - nu**2)
+        P[sk.P_PSI2] = 6 * eta_v * h / (1 - nu**2)
         P[sk.P_JS] = h * h / 3
         P[sk.P_GS] = 2 * h * G * kappa
         P[sk.P_GV] = 2 * h * eta_v * kappa
@@ -563,10 +735,24 @@ class ShellModel:
         P[sk.P_HC] = h
         P[sk.P_KC] = Ey / h
 
-        model = cls(profile=profile, dt_s=dt, integrator=integrator, flags=flags, P=P, E=E, Nd=Nd,
-                    node_mass=m, node_added_mass=ma, n0=n0, payload_kg=payload, body_added_mass_kg=mx,
-                    actuation=actuation, initial_perturbation_m=pert, initial_velocity_m_s=U0,
-                    duration_s=duration)
+        model = cls(
+            profile=profile,
+            dt_s=dt,
+            integrator=integrator,
+            flags=flags,
+            P=P,
+            E=E,
+            Nd=Nd,
+            node_mass=m,
+            node_added_mass=ma,
+            n0=n0,
+            payload_kg=payload,
+            body_added_mass_kg=mx,
+            actuation=actuation,
+            initial_perturbation_m=pert,
+            initial_velocity_m_s=U0,
+            duration_s=duration,
+        )
         model.specialise_kernel = spec
         model.coupling = coupling
         model.outlet = outlet
@@ -574,22 +760,31 @@ class ShellModel:
         model.code_rim = code_rim
         if code:
             model._initial_energy = model._stored(model.initial_state())[0]
-        model.material = dict(youngs_modulus_pa=Ey, viscosity_pa_s=eta_v, poisson_ratio=nu, half_thickness_m=h,
-                              density_kg_m3=rho_s)
+        model.material = {
+            'youngs_modulus_pa': Ey,
+            'viscosity_pa_s': eta_v,
+            'poisson_ratio': nu,
+            'half_thickness_m': h,
+            'density_kg_m3': rho_s,
+        }
         # ---- refuse what cannot run
         if integrator == 'verlet':
             bound = model.stable_step_s(model.initial_state())
             if dt > bound:
                 raise ModelError(
-                    f'simulation.dt_s: {dt!r} s exceeds the explicit (verlet) stable step {bound:.3g} s of this shell '
-                    f'(E={Ey:g} Pa, eta_v={eta_v:g} Pa s, {ne} elements); allowed: dt_s <= {bound:.3g} s, or '
-                    f'integrator: implicit_midpoint / backward_euler')
+                    f'simulation.dt_s: {dt!r} s exceeds the explicit (verlet) stable step '
+                    f'{bound:.3g} s of this shell (E={Ey:g} Pa, eta_v={eta_v:g} Pa s, '
+                    f'{ne} elements); allowed: dt_s <= {bound:.3g} s, '
+                    'or integrator: implicit_midpoint / backward_euler'
+                )
         if flags & sk.F_ROUTINE:
             limit = min(tc, tr, 1.0 / freq) / 10.0
             if dt > limit:
-                raise ModelError(f'simulation.dt_s: {dt!r} s does not resolve the actuation routine (contraction '
-                                 f'{tc:g} s, release {tr:g} s); allowed: dt_s <= {limit:.3g} s (a tenth of the '
-                                 f'shortest phase)')
+                raise ModelError(
+                    f'simulation.dt_s: {dt!r} s does not resolve the actuation routine '
+                    f'(contraction {tc:g} s, release {tr:g} s); allowed: dt_s <= {limit:.3g} s '
+                    '(a tenth of the shortest phase)'
+                )
         return model
 
     # ------------------------------------------------------------------ protocol
@@ -600,7 +795,7 @@ class ShellModel:
     def initial_state(self) -> np.ndarray:
         n1 = self.n_nodes
         s = np.zeros(self.n_state)
-        q = s[:3 * n1].reshape(n1, 3)
+        q = s[: 3 * n1].reshape(n1, 3)
         q[:, 0] = self.ref.r0
         q[:, 1] = self.ref.z0
         q[:, 2] = self.ref.theta0
@@ -612,9 +807,10 @@ class ShellModel:
         s[tail + sk.S_U] = U0
         v = s[3 * n1:6 * n1].reshape(n1, 3)
         if self.flags & sk.F_CODE:
-            v[self.code_rim + 1:, 1] = U0   # the polar cap is the body's; the wall moves with the vehicle
+            # the polar cap is the body's; the wall moves with the vehicle
+            v[self.code_rim + 1:, 1] = U0
         elif not self.flags & sk.F_PAPER:
-            v[1:-1, 1] = U0   # wall moving with the vehicle (absolute axial velocity)
+            v[1:-1, 1] = U0  # wall moving with the vehicle (absolute axial velocity)
             v[0, 1] = U0
         s[tail + sk.S_VOL] = self.ref.volume_m3()
         return s
@@ -625,12 +821,14 @@ class ShellModel:
         return float(command.cable_force_n)
 
     def advance(self, state: np.ndarray, time_s: float, n_steps: int, command: Command) -> int:
-        """Advance in place by ``n_steps`` steps of ``dt_s``.
+        """
+        Advance in place by ``n_steps`` steps of ``dt_s``.
 
         Implicit schemes: a step whose Newton solve fails (violent collapse, wall contact) is
-        retried as 4, 16, then 64 sub-steps (counted in ``self.substep_events``); only if that fails
-        too, or on a non-finite / out-of-bounds state, SimulationBlowUp is raised with the state at
-        the last good step."""
+        retried as 4, 16, then 64 sub-steps (counted in ``self.substep_events``); only if that
+        fails too, or on a non-finite / out-of-bounds state, SimulationBlowUp is raised with the
+        state at the last good step.
+        """
         if n_steps <= 0:
             return 0
         kern = self._kernel()
@@ -639,7 +837,9 @@ class ShellModel:
         remaining = int(n_steps)
         total = 0
         while remaining > 0:
-            done, code = kern(self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme)
+            done, code = kern(
+                self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme
+            )
             total += done
             remaining -= done
             t = float(time_s) + total * self.dt_s
@@ -662,18 +862,25 @@ class ShellModel:
                     remaining -= 1
                     t = float(time_s) + total * self.dt_s
                     continue
-            raise SimulationBlowUp(f'shell model stopped at t={t:.6g} s: {ERR_TEXT.get(code, code)} '
-                                   f'(state kept at the last good step, dt_s={self.dt_s:g}, '
-                                   f'integrator={self.integrator}){self._diagnose(state)}', t)
+            raise SimulationBlowUp(
+                f'shell model stopped at t={t:.6g} s: {ERR_TEXT.get(code, code)} '
+                f'(state kept at the last good step, dt_s={self.dt_s:g}, '
+                f'integrator={self.integrator}){self._diagnose(state)}',
+                t,
+            )
         return total
 
     def _diagnose(self, state) -> str:
-        """Why a run may have failed, from the last good state: the most compressed meridian
-        element and hoop.  The Kelvin-Voigt law on Green strains (Saint-Venant-Kirchhoff) softens
-        in compression below a stretch of 1/sqrt(3) = 0.577, where an element can fold through
-        itself; without viscosity nothing damps the resulting mesh-scale crumpling."""
+        """
+        Explain why a run may have failed, from the last good state.
+
+        Names the most compressed meridian element and hoop.  The Kelvin-Voigt law on Green strains
+        (Saint-Venant-Kirchhoff) softens in compression below a stretch of 1/sqrt(3) = 0.577, where
+        an element can fold through itself; without viscosity nothing damps the resulting
+        mesh-scale crumpling.
+        """
         n1 = self.n_nodes
-        q = state[:3 * n1].reshape(n1, 3)
+        q = state[: 3 * n1].reshape(n1, 3)
         if not np.all(np.isfinite(q)):
             return ''
         ds = self.E[:, sk.E_DS]
@@ -681,13 +888,21 @@ class ShellModel:
         tau = 0.5 * (q[:-1, 0] + q[1:, 0]) / self.E[:, sk.E_R0M]
         e = int(np.argmin(lam))
         xm = 0.5 * (self.ref.X[e] + self.ref.X[e + 1]) / self.ref.X[-1]
-        msg = (f'; last good state: most compressed meridian element stretch {lam[e]:.3g} at X/L={xm:.2f}, '
-               f'smallest hoop stretch {tau.min():.3g}')
+        msg = (
+            f'; last good state: most compressed meridian element stretch {lam[e]:.3g} '
+            f'at X/L={xm:.2f}, '
+            f'smallest hoop stretch {tau.min():.3g}'
+        )
         if lam[e] < 1 / math.sqrt(3):
-            msg += (' (below 0.577 the Saint-Venant-Kirchhoff membrane law softens and the wall can fold '
-                    'through itself)')
+            msg += (
+                ' (below 0.577 the Saint-Venant-Kirchhoff membrane law softens and the wall can '
+                'fold through itself)'
+            )
         if tau.min() < 1 / math.sqrt(3):
-            msg += ' (hoop stretch below 0.577: the hoop force of that law softens, the wall snaps towards the axis)'
+            msg += (
+                ' (hoop stretch below 0.577: the hoop force of that law softens, the wall snaps '
+                'towards the axis)'
+            )
         if not self.flags & sk.F_VISC:
             msg += '; the wall has no viscosity (nothing damps mesh-scale crumpling)'
         remedy = 'a smaller actuation amplitude, a smaller dt_s'
@@ -696,29 +911,40 @@ class ShellModel:
         return msg + f'; what would work: {remedy}'
 
     def _kernel(self):
-        """The compiled advance kernel: generic (runtime flags, default) or flag-specialised.
+        """
+        Return the compiled advance kernel: generic (runtime flags, default) or flag-specialised.
 
-        ``sk.advance_specialised`` forces ``flags`` to a literal (dead terms are compiled out), but every call
-        through the dispatcher then pays ~8 ms of literal re-dispatch; so it is called once (0 steps)
-        to compile or load the specialisation from the cache, and its entry point is kept."""
+        ``sk.advance_specialised`` forces ``flags`` to a literal (dead terms are compiled out), but
+        every call through the dispatcher then pays ~8 ms of literal re-dispatch; so it is called
+        once (0 steps) to compile or load the specialisation from the cache, and its entry point is
+        kept.
+        """
         if not self.specialise_kernel:
             return sk.advance
         fn = _KERNELS.get(self.flags)
         if fn is None:
             dummy = self.initial_state()
-            sk.advance_specialised(self.flags, dummy, 0.0, 0, 0.0, self.E, self.Nd, self.P, self.scheme)
+            sk.advance_specialised(
+                self.flags, dummy, 0.0, 0, 0.0, self.E, self.Nd, self.P, self.scheme
+            )
             for sig, cres in sk.advance_specialised.overloads.items():
                 lit = getattr(sig[0], 'literal_value', None)
                 if lit == self.flags:
                     fn = cres.entry_point
                     break
-            if fn is None:   # pragma: no cover - numba internals changed: fall back to the generic kernel
+            if (
+                fn is None
+            ):  # pragma: no cover - numba internals changed: fall back to the generic kernel
                 fn = sk.advance
             _KERNELS[self.flags] = fn
         return fn
 
     def routine_command(self, time_s: float) -> Command:
-        """The command the built-in routine applies at ``time_s`` (cable force; muscle: none)."""
+        """
+        Return the command the built-in routine applies at ``time_s``.
+
+        Cable force; muscle: none.
+        """
         if self.actuation.get('kind') == 'cable' and self.flags & sk.F_ROUTINE:
             a, _ = sk.routine(float(time_s), self.P)
             return Command(cable_force_n=float(self.P[sk.P_AMP] * a))
@@ -742,11 +968,21 @@ class ShellModel:
         vol = float(st[sk.T_VOL])
         rho = self.P[sk.P_RHO]
         return Observation(
-            time_s=float(time_s), position_m=float(T[sk.S_X]), velocity_m_s=float(T[sk.S_U]),
-            acceleration_m_s2=float(T[sk.S_A]), mantle_radius_m=float(state[3 * self.mid_node]), volume_m3=vol,
-            fluid_mass_kg=float(rho * vol), thrust_n=float(T[sk.S_THR]), added_mass_force_n=0.0,
-            drag_n=float(T[sk.S_BDRAG]), jet_speed_m_s=float(T[sk.S_UJ]), cavity_pressure_pa=float(T[sk.S_P]),
-            pump_flow_m3_s=0.0, valve_opening=1.0)
+            time_s=float(time_s),
+            position_m=float(T[sk.S_X]),
+            velocity_m_s=float(T[sk.S_U]),
+            acceleration_m_s2=float(T[sk.S_A]),
+            mantle_radius_m=float(state[3 * self.mid_node]),
+            volume_m3=vol,
+            fluid_mass_kg=float(rho * vol),
+            thrust_n=float(T[sk.S_THR]),
+            added_mass_force_n=0.0,
+            drag_n=float(T[sk.S_BDRAG]),
+            jet_speed_m_s=float(T[sk.S_UJ]),
+            cavity_pressure_pa=float(T[sk.S_P]),
+            pump_flow_m3_s=0.0,
+            valve_opening=1.0,
+        )
 
     def _stored(self, state):
         n1 = self.n_nodes
@@ -756,13 +992,17 @@ class ShellModel:
         v[:, 1] *= 1.0 - self.Nd[:, sk.N_FIXZ]
         v[:, 2] *= 1.0 - self.Nd[:, sk.N_FIXT]
         U = float(state[6 * n1 + sk.S_U])
-        k_own = 0.5 * float(np.sum(self.node_mass * (v[:, 0] ** 2 + v[:, 1] ** 2)
-                                   + self.Nd[:, sk.N_MTT] * v[:, 2] ** 2))
+        k_own = 0.5 * float(
+            np.sum(
+                self.node_mass * (v[:, 0] ** 2 + v[:, 1] ** 2)
+                + self.Nd[:, sk.N_MTT] * v[:, 2] ** 2
+            )
+        )
         if getattr(self, 'isotropic_added_mass', False):
             k_am = 0.5 * float(np.sum(self.node_added_mass * (v[:, 0] ** 2 + v[:, 1] ** 2)))
         else:
             vn = v[:, 0] * self.n0[:, 0] + v[:, 1] * self.n0[:, 1]
-            k_am = 0.5 * float(np.sum(self.node_added_mass * vn ** 2))
+            k_am = 0.5 * float(np.sum(self.node_added_mass * vn**2))
         k_veh = 0.5 * self.payload_kg * U * U + k_own
         if self.flags & sk.F_PAPER:
             # node velocities are relative to the body: the vehicle carries the shell's own mass
@@ -775,10 +1015,16 @@ class ShellModel:
         tot, el, kv, ko, ki = self._stored(state)
         T = state[6 * self.n_nodes:]
         led = {
-            'stored_elastic': el, 'stored_kinetic_vehicle': kv, 'stored_kinetic_outer_fluid': ko,
-            'stored_kinetic_internal': ki, 'in_actuation_work': float(T[sk.S_IN]), 'in_initial': float(self._initial_energy),
-            'out_jet_kinetic': float(T[sk.S_JET]), 'out_drag': float(T[sk.S_DRAG]),
-            'out_viscous': float(T[sk.S_VISC]), 'out_other': float(T[sk.S_OTHER]),
+            'stored_elastic': el,
+            'stored_kinetic_vehicle': kv,
+            'stored_kinetic_outer_fluid': ko,
+            'stored_kinetic_internal': ki,
+            'in_actuation_work': float(T[sk.S_IN]),
+            'in_initial': float(self._initial_energy),
+            'out_jet_kinetic': float(T[sk.S_JET]),
+            'out_drag': float(T[sk.S_DRAG]),
+            'out_viscous': float(T[sk.S_VISC]),
+            'out_other': float(T[sk.S_OTHER]),
         }
         out = led['out_jet_kinetic'] + led['out_drag'] + led['out_viscous'] + led['out_other']
         created = 0.0
@@ -786,19 +1032,21 @@ class ShellModel:
             # not an input: the energy the paper's equations create, named (docs/PHYSICS_SHELL.md)
             created = led['created_unpaid_jet_kinetic'] = float(T[sk.S_CREATED])
         elif self.flags & sk.F_CODE:
-            # experiment E (docs/PHYSICS_SHELL.md): the unpaid jet, and the work of the wall-borne thrust,
-            # refill force and drag beyond what the books charge at the vehicle's speed
+            # experiment E (docs/PHYSICS_SHELL.md): the unpaid jet, and the work of the wall-borne
+            # thrust, refill force and drag beyond what the books charge at the vehicle's speed
             led['created_unpaid_jet_kinetic'] = float(T[sk.S_CREATED])
             led['created_wall_loads'] = float(T[sk.S_CREATED_WALL])
             created = led['created_unpaid_jet_kinetic'] + led['created_wall_loads']
         err = tot - led['in_initial'] - led['in_actuation_work'] + out - created
         led['closure_error'] = float(err)
-        led['closure_relative'] = float(err / max(led['in_initial'] + led['in_actuation_work'], 1e-300))
+        led['closure_relative'] = float(
+            err / max(led['in_initial'] + led['in_actuation_work'], 1e-300)
+        )
         return led
 
     def profile_of(self, state):
         n1 = self.n_nodes
-        q = state[:3 * n1].reshape(n1, 3)
+        q = state[: 3 * n1].reshape(n1, 3)
         return q[:, 0].copy(), q[:, 1].copy()
 
     def profile(self, state: np.ndarray):
@@ -806,14 +1054,17 @@ class ShellModel:
         return self.profile_of(state)
 
     def stable_step_s(self, state: np.ndarray) -> float:
-        """Largest stable step of the explicit (verlet) scheme at this state.
+        """
+        Return the largest stable step of the explicit (verlet) scheme at this state.
 
         From the generalised eigenvalues of the linearised system at the state: the highest
         circular frequency omega (stiffness K against the mass M, elastic + geometric) and the
         highest damping rate c (Kelvin-Voigt and drag, C against M); central differences with
         damping are stable for dt <= 2/omega (sqrt(1 + xi^2) - xi), xi = c/(2 omega).  A 0.9
-        safety factor covers the stiffening of large deformations."""
+        safety factor covers the stiffening of large deformations.
+        """
         import scipy.linalg as sla
+
         n1 = self.n_nodes
         t = float(state[6 * n1 + sk.S_TIME])
         Kb, Cb = sk.stiffness_damping(self.flags, state, t, self.E, self.Nd, self.P)

@@ -1,4 +1,7 @@
-"""Numba kernels of the axisymmetric Reissner shell mantle (paper 000).  No ROS, no Python objects.
+"""
+Numba kernels of the axisymmetric Reissner shell mantle (paper 000).
+
+No ROS, no Python objects.
 
 Discretisation (see shell.py for the full model description)
 -------------------------------------------------------------
@@ -8,7 +11,8 @@ no shear locking, and the hoop terms only ever see ``r0`` at element midpoints, 
 even next to the pole -> no polar singularity)::
 
     r_X = (r_{e+1} - r_e)/ds,  z_X = (z_{e+1} - z_e)/ds,  theta_m = (theta_e + theta_{e+1})/2
-    lambda = r_X cos th + z_X sin th,  eta = -r_X sin th + z_X cos th,  mu = (theta_{e+1}-theta_e)/ds
+    lambda = r_X cos th + z_X sin th,  eta = -r_X sin th + z_X cos th,
+    mu = (theta_{e+1}-theta_e)/ds
     tau = r_m / r0_m,  varsigma = sin th / r0_m
     e11 = (lambda^2 + eta^2 - 1)/2        e22 = (tau^2 - tau_d^2)/2      gamma = eta - eta0
     d11 = mu0 lambda0 - mu lambda         d22 = varsigma0 - tau varsigma
@@ -25,22 +29,24 @@ Stored energy (Kelvin-Voigt elastic part, h the half-thickness, A_e = 2 pi r0_m 
 
 Internal forces are exactly ``-dW/dq = -B^T sigma`` (B = d strain / dq), so without viscosity
 and fluid loads the semi-discrete system is Hamiltonian.  The Kelvin-Voigt viscous forces come
-from the dissipation function ``D = A_e [Psi2/2 (.. rates ..) + Js Psi2/2 (..) + G_v/2 gamma_dot^2]``
-(``Psi2 = 6 eta_v h/(1-nu^2)``, ``G_v = 2 h eta_v``): ``f_v = -B^T D_v B q_dot``, power ``2D >= 0``.
+from the dissipation function ``D = A_e [Psi2/2 (.. rates ..) + Js Psi2/2 (..) + G_v/2
+gamma_dot^2]`` (``Psi2 = 6 eta_v h/(1-nu^2)``, ``G_v = 2 h eta_v``): ``f_v = -B^T D_v B q_dot``,
+power ``2D >= 0``.
 
 Velocities: radial and angular velocities are relative to the body (= absolute for r), the axial
 velocity of each node is stored **absolute** (``w = z_dot + U``, U the vehicle speed), which
 makes the mass matrix block diagonal: shell nodes and vehicle only interact through the forces
 at the clamped ring, the cavity pressure and the jet.
 """
+
 from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import literally, njit
+import numpy as np
 
-# ---- flags (bitmask; compiled out only by advance_specialised via numba.literally) -------------------------------------
+# ---- flags (bitmask; compiled out only by advance_specialised via numba.literally) -----------
 F_VISC = 1
 F_DRAG = 2
 F_JET = 4
@@ -48,28 +54,40 @@ F_BODY = 8
 F_CABLE = 16
 F_MUSCLE = 32
 F_ROUTINE = 64
-# paper 000's coupling (Fig. 5 and the paragraph before its state-space form): the shell is solved in the body frame with only drag and
-# added mass from the water (no cavity pressure on the wall), and the vehicle is driven by the jet
-# thrust alone; the vehicle velocity enters only the kinematics (the position update)
+# paper 000's coupling (Fig. 5 and the paragraph before its state-space form): the shell is solved
+# in the body frame with only drag and added mass from the water (no cavity pressure on the wall),
+# and the vehicle is driven by the jet thrust alone; the vehicle velocity enters only the
+# kinematics (the position update)
 F_PAPER = 128
 # the outlet is the mantle's own free edge: A_out(t) = pi r_edge(t)^2 (paper 000 section 5)
 F_EDGE = 256
-# the authors' code as written (experiment E, coupling paper_code; docs/PHYSICS_SHELL.md "Experiment E"):
-# pole clamped to the body, edge free, fixed nozzle, no cavity pressure and no tangential drag on the
-# wall; thrust, refilling force and body drag loaded on the wall as a uniform axial load per reference
-# area; the vehicle (consistent frame, monolithic) feels them through the clamped pole's axial reaction
+# the authors' code as written (experiment E, coupling paper_code; docs/PHYSICS_SHELL.md
+# "Experiment E"): pole clamped to the body, edge free, fixed nozzle, no cavity pressure and no
+# tangential drag on the wall; thrust, refilling force and body drag loaded on the wall as a
+# uniform axial load per reference area; the vehicle (consistent frame, monolithic) feels them
+# through the clamped pole's axial reaction
 F_CODE = 512
 
 # ---- parameter vector P ---------------------------------------------------------------------
 P_PSI, P_PSI2, P_JS, P_GS, P_GV, P_NU = 0, 1, 2, 3, 4, 5
 P_RHO, P_AOUT, P_AIN, P_CF, P_CT, P_CD = 6, 7, 8, 9, 10, 11
 P_MBODY, P_AMP, P_FREQ, P_TC, P_TR = 12, 13, 14, 15, 16
-P_DT, P_ALPHA, P_TOL, P_RLIM, P_QLIM, P_MAXIT, P_DELAY, P_V0, P_VLIM = 17, 18, 19, 20, 21, 22, 23, 24, 25
-P_PSTAT = 26   # static gauge pressure load on the inner surface (test/load scenes), Pa
-P_HC, P_KC = 27, 28   # axis contact: radius where the inner faces meet, penalty stiffness per area
-P_VSCALE = 29         # Newton velocity scale: shortest element / dt (converged when a step moves a
-                      # node by less than newton_tolerance times the shortest element)
-P_MSHELL = 30        # mass of the moving shell, kg (carried by the vehicle in the paper coupling)
+P_DT, P_ALPHA, P_TOL, P_RLIM, P_QLIM, P_MAXIT, P_DELAY, P_V0, P_VLIM = (
+    17,
+    18,
+    19,
+    20,
+    21,
+    22,
+    23,
+    24,
+    25,
+)
+P_PSTAT = 26  # static gauge pressure load on the inner surface (test/load scenes), Pa
+P_HC, P_KC = 27, 28  # axis contact: radius where the inner faces meet, penalty stiffness per area
+P_VSCALE = 29  # Newton velocity scale: shortest element / dt (converged when a step moves a
+# node by less than newton_tolerance times the shortest element)
+P_MSHELL = 30  # mass of the moving shell, kg (carried by the vehicle in the paper coupling)
 N_PARAMS = 31
 
 # ---- element table E[e, :] -------------------------------------------------------------------
@@ -77,22 +95,46 @@ E_DS, E_R0M, E_LAM0, E_ETA0, E_K0, E_VS0, E_SMUS, E_AREA = 0, 1, 2, 3, 4, 5, 6, 
 N_ECOLS = 8
 
 # ---- node table Nd[i, :] --------------------------------------------------------------------
-N_MRR, N_MRZ, N_MZZ, N_MTT, N_FIXR, N_FIXZ, N_FIXT, N_WC, N_DAREA, N_HC = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
+N_MRR, N_MRZ, N_MZZ, N_MTT, N_FIXR, N_FIXZ, N_FIXT, N_WC, N_DAREA, N_HC = (
+    0,
+    1,
+    2,
+    3,
+    4,
+    5,
+    6,
+    7,
+    8,
+    9,
+)
 N_NCOLS = 10
 
 # ---- state tail (after q[3 n1] and v[3 n1]) ------------------------------------------------
 S_X, S_U, S_A, S_IN, S_JET, S_DRAG, S_VISC, S_OTHER = 0, 1, 2, 3, 4, 5, 6, 7
 S_THR, S_BDRAG, S_UJ, S_P, S_VOL, S_VDOT, S_TIME = 8, 9, 10, 11, 12, 13, 14
-S_NIT, S_NJAC = 15, 16   # cumulative Newton iterations and Jacobian factorisations (diagnostics)
-S_CREATED = 17           # paper coupling: the jet's kinetic energy that no wall force pays for, J
-S_CREATED_WALL = 18      # paper_code: work of the wall-borne thrust, refill force and drag beyond the books, J
+S_NIT, S_NJAC = 15, 16  # cumulative Newton iterations and Jacobian factorisations (diagnostics)
+S_CREATED = 17  # paper coupling: the jet's kinetic energy that no wall force pays for, J
+S_CREATED_WALL = (
+    18  # paper_code: work of the wall-borne thrust, refill force and drag beyond the books, J
+)
 N_TAIL = 19
 
 # ---- stats returned by the force evaluation -------------------------------------------------
-T_EEL, T_PVISC, T_PDRAG, T_VOL, T_VDOT, T_P, T_PACT, T_FRING, T_RMAX, T_PCONT = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
-T_AOUT = 10   # outlet area, m^2
-T_WREL = 11   # paper_code: area-weighted mean axial wall velocity relative to the body, m/s
-T_FREF = 12   # paper_code: the refilling force (<= 0), N
+T_EEL, T_PVISC, T_PDRAG, T_VOL, T_VDOT, T_P, T_PACT, T_FRING, T_RMAX, T_PCONT = (
+    0,
+    1,
+    2,
+    3,
+    4,
+    5,
+    6,
+    7,
+    8,
+    9,
+)
+T_AOUT = 10  # outlet area, m^2
+T_WREL = 11  # paper_code: area-weighted mean axial wall velocity relative to the body, m/s
+T_FREF = 12  # paper_code: the refilling force (<= 0), N
 N_STATS = 13
 
 # blow-up codes
@@ -102,8 +144,12 @@ BW = 5  # half bandwidth of the dof ordering
 
 @njit(cache=True, nogil=True)
 def routine(t, P):
-    """Activation a(t) in [0, 1] and da/dt of the periodic routine: half-cosine rise over the
-    contraction time, half-cosine fall over the release time, rest for the remaining period."""
+    """
+    Return the activation a(t) in [0, 1] and da/dt of the periodic routine.
+
+    Half-cosine rise over the contraction time, half-cosine fall over the release time, rest for
+    the remaining period.
+    """
     t = t - P[P_DELAY]
     if t < 0.0:
         return 0.0, 0.0
@@ -122,13 +168,20 @@ def routine(t, P):
 
 @njit(cache=True, nogil=True)
 def contact(r, hc, k):
-    """Axis contact barrier for r < hc: force f = k hc (hc/r - 1) (outward), energy
-    k hc (hc ln(hc/r) - (hc - r)), stiffness df/dr = -k hc^2/r^2; below r = hc/10 it continues
-    linearly (C1) so that a Newton iterate on the wrong side of the axis stays finite.
-    Returns (force, energy, -df/dr)."""
+    """
+    Axis contact barrier for r < hc.
+
+    Force f = k hc (hc/r - 1) (outward), energy k hc (hc ln(hc/r) - (hc - r)), stiffness
+    df/dr = -k hc^2/r^2; below r = hc/10 it continues linearly (C1) so that a Newton iterate on the
+    wrong side of the axis stays finite. Returns (force, energy, -df/dr).
+    """
     r1 = 0.1 * hc
     if r >= r1:
-        return k * hc * (hc / r - 1.0), k * hc * (hc * math.log(hc / r) - (hc - r)), k * hc * hc / (r * r)
+        return (
+            k * hc * (hc / r - 1.0),
+            k * hc * (hc * math.log(hc / r) - (hc - r)),
+            k * hc * hc / (r * r),
+        )
     f1 = k * hc * (hc / r1 - 1.0)
     e1 = k * hc * (hc * math.log(hc / r1) - (hc - r1))
     s1 = k * hc * hc / (r1 * r1)
@@ -157,34 +210,60 @@ def element_strain(q6, ds, r0m, lam0, eta0, k0, vs0, taud, B):
     d22 = vs0 - tau * vs
     ids = 1.0 / ds
     # e11
-    B[0, 0] = -rX * ids; B[0, 1] = -zX * ids; B[0, 2] = 0.0
-    B[0, 3] = rX * ids;  B[0, 4] = zX * ids;  B[0, 5] = 0.0
+    B[0, 0] = -rX * ids
+    B[0, 1] = -zX * ids
+    B[0, 2] = 0.0
+    B[0, 3] = rX * ids
+    B[0, 4] = zX * ids
+    B[0, 5] = 0.0
     # e22
     g = 0.5 * tau / r0m
-    B[1, 0] = g; B[1, 1] = 0.0; B[1, 2] = 0.0; B[1, 3] = g; B[1, 4] = 0.0; B[1, 5] = 0.0
+    B[1, 0] = g
+    B[1, 1] = 0.0
+    B[1, 2] = 0.0
+    B[1, 3] = g
+    B[1, 4] = 0.0
+    B[1, 5] = 0.0
     # gamma = eta - eta0
-    B[2, 0] = s * ids; B[2, 1] = -c * ids; B[2, 2] = -0.5 * lam
-    B[2, 3] = -s * ids; B[2, 4] = c * ids; B[2, 5] = -0.5 * lam
-    # d11 = k0 - mu lam ; dlam = (-c/ds, -s/ds, eta/2, c/ds, s/ds, eta/2) ; dmu = (0,0,-1/ds,0,0,1/ds)
-    B[3, 0] = mu * c * ids; B[3, 1] = mu * s * ids; B[3, 2] = lam * ids - 0.5 * mu * eta
-    B[3, 3] = -mu * c * ids; B[3, 4] = -mu * s * ids; B[3, 5] = -lam * ids - 0.5 * mu * eta
+    B[2, 0] = s * ids
+    B[2, 1] = -c * ids
+    B[2, 2] = -0.5 * lam
+    B[2, 3] = -s * ids
+    B[2, 4] = c * ids
+    B[2, 5] = -0.5 * lam
+    # d11 = k0 - mu lam ; dlam = (-c/ds, -s/ds, eta/2, c/ds, s/ds, eta/2) ;
+    # dmu = (0,0,-1/ds,0,0,1/ds)
+    B[3, 0] = mu * c * ids
+    B[3, 1] = mu * s * ids
+    B[3, 2] = lam * ids - 0.5 * mu * eta
+    B[3, 3] = -mu * c * ids
+    B[3, 4] = -mu * s * ids
+    B[3, 5] = -lam * ids - 0.5 * mu * eta
     # d22 = vs0 - tau vs
     g2 = -0.5 * vs / r0m
     g3 = -0.5 * tau * c / r0m
-    B[4, 0] = g2; B[4, 1] = 0.0; B[4, 2] = g3; B[4, 3] = g2; B[4, 4] = 0.0; B[4, 5] = g3
+    B[4, 0] = g2
+    B[4, 1] = 0.0
+    B[4, 2] = g3
+    B[4, 3] = g2
+    B[4, 4] = 0.0
+    B[4, 5] = g3
     return e11, e22, gam, d11, d22
 
 
 @njit(cache=True, nogil=True)
 def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
-    """Elastic + viscous generalised force on the 6 element dofs (into f6, overwritten).
+    """
+    Elastic + viscous generalised force on the 6 element dofs (into f6, overwritten).
 
     out[0] = elastic energy, out[1] = viscous power (>= 0), out[2] = sigma_22 (membrane hoop
-    resultant times area, for the muscle power)."""
+    resultant times area, for the muscle power).
+    """
     ds = Erow[E_DS]
     A = Erow[E_AREA]
-    e11, e22, gam, d11, d22 = element_strain(q6, ds, Erow[E_R0M], Erow[E_LAM0], Erow[E_ETA0], Erow[E_K0],
-                                             Erow[E_VS0], taud, B)
+    e11, e22, gam, d11, d22 = element_strain(
+        q6, ds, Erow[E_R0M], Erow[E_LAM0], Erow[E_ETA0], Erow[E_K0], Erow[E_VS0], taud, B
+    )
     psi = P[P_PSI]
     nu = P[P_NU]
     pj = psi * P[P_JS]
@@ -193,14 +272,29 @@ def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
     s2 = A * P[P_GS] * gam
     s3 = A * pj * (d11 + nu * d22)
     s4 = A * pj * (d22 + nu * d11)
-    energy = 0.5 * A * (psi * (e11 * e11 + 2 * nu * e11 * e22 + e22 * e22)
-                        + pj * (d11 * d11 + 2 * nu * d11 * d22 + d22 * d22) + P[P_GS] * gam * gam)
+    energy = (
+        0.5
+        * A
+        * (
+            psi * (e11 * e11 + 2 * nu * e11 * e22 + e22 * e22)
+            + pj * (d11 * d11 + 2 * nu * d11 * d22 + d22 * d22)
+            + P[P_GS] * gam * gam
+        )
+    )
     pvisc = 0.0
     if flags & F_VISC:
-        r0 = 0.0; r1 = 0.0; r2 = 0.0; r3 = 0.0; r4 = 0.0
+        r0 = 0.0
+        r1 = 0.0
+        r2 = 0.0
+        r3 = 0.0
+        r4 = 0.0
         for j in range(6):
             vj = v6[j]
-            r0 += B[0, j] * vj; r1 += B[1, j] * vj; r2 += B[2, j] * vj; r3 += B[3, j] * vj; r4 += B[4, j] * vj
+            r0 += B[0, j] * vj
+            r1 += B[1, j] * vj
+            r2 += B[2, j] * vj
+            r3 += B[3, j] * vj
+            r4 += B[4, j] * vj
         psi2 = P[P_PSI2]
         pj2 = psi2 * P[P_JS]
         v0 = A * psi2 * (r0 + nu * r1)
@@ -209,7 +303,11 @@ def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
         v3 = A * pj2 * (r3 + nu * r4)
         v4 = A * pj2 * (r4 + nu * r3)
         pvisc = v0 * r0 + v1 * r1 + v2 * r2 + v3 * r3 + v4 * r4
-        s0 += v0; s1v = s1 + v1; s2 += v2; s3 += v3; s4 += v4
+        s0 += v0
+        s1v = s1 + v1
+        s2 += v2
+        s3 += v3
+        s4 += v4
     else:
         s1v = s1
     for j in range(6):
@@ -222,14 +320,20 @@ def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
 
 @njit(cache=True, nogil=True)
 def volume_grad(q, n1, g):
-    """Cavity volume between the shell and the ring plane, V = sum of frusta
-    pi/3 (r_i^2 + r_i r_j + r_j^2)(z_i - z_j), and its gradient g (dofs 3i, 3i+1)."""
+    """
+    Cavity volume between the shell and the ring plane, and its gradient.
+
+    V = sum of frusta pi/3 (r_i^2 + r_i r_j + r_j^2)(z_i - z_j), and its gradient g (dofs 3i,
+    3i+1).
+    """
     for k in range(3 * n1):
         g[k] = 0.0
     V = 0.0
     for e in range(n1 - 1):
-        ra = q[3 * e]; za = q[3 * e + 1]
-        rb = q[3 * e + 3]; zb = q[3 * e + 4]
+        ra = q[3 * e]
+        za = q[3 * e + 1]
+        rb = q[3 * e + 3]
+        zb = q[3 * e + 4]
         S = ra * ra + ra * rb + rb * rb
         dz = za - zb
         V += math.pi / 3.0 * S * dz
@@ -251,13 +355,15 @@ def outlet_area(flags, q, n1, P):
 
 @njit(cache=True, nogil=True)
 def jet_terms(Vdot, U, P, A_out):
-    """Jet model: returns (p, u_j, thrust, ram, P_jet_out, P_other).
+    """
+    Jet model: returns (p, u_j, thrust, ram, P_jet_out, P_other).
 
     Outflow (V' < 0): u_j = -V'/A_out, p = rho u_j^2 / 2 on the inner surface (the shell pays the
     jet's kinetic energy flux), thrust C_f rho A_out u_j^2; earth-frame jet energy flux
     rho A u_j (u_j - U)^2 / 2; a C_f != 1 mismatch (1 - C_f) rho A u_j^2 U is booked as 'other'.
     Inflow (V' > 0) through A_in: suction p = -rho u_in^2 / 2, the inflow kinetic energy and the
-    ram loss of bringing the ingested water to the vehicle speed (ram force rho V' U) mix away."""
+    ram loss of bringing the ingested water to the vehicle speed (ram force rho V' U) mix away.
+    """
     rho = P[P_RHO]
     if Vdot < 0.0:
         A = A_out
@@ -285,8 +391,12 @@ def code_rim(Nd):
 
 @njit(cache=True, nogil=True)
 def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
-    """All generalised forces on the shell dofs at (q, v, U, t), into F (including the reactions
-    on constrained dofs). Fills st (stats), gV (volume gradient), vrel (velocities rel. body)."""
+    """
+    Compute all generalised forces on the shell dofs at (q, v, U, t), into F.
+
+    F includes the reactions on constrained dofs. Fills st (stats), gV (volume gradient), vrel
+    (velocities rel. body).
+    """
     n1 = Nd.shape[0]
     n = 3 * n1
     ne = n1 - 1
@@ -377,7 +487,8 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
     fref = 0.0
     if flags & F_CODE:
         # the authors' code: (thrust + refill force + body drag) per unit reference area, axial, on
-        # every node (octopus_derivatives.m: fluid = mod_fluid*[senth;costh;0], zetas_e = [0;0;0;fluid])
+        # every node (octopus_derivatives.m: fluid = mod_fluid*[senth;costh;0],
+        # zetas_e = [0;0;0;fluid])
         kc = code_rim(Nd)
         aw = 0.0
         rmx = 0.0
@@ -418,7 +529,7 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
     st[T_PACT] = pact
     st[T_FRING] = F[3 * (n1 - 1) + 1]
     if flags & F_CODE:
-        st[T_FRING] = F[3 * code_rim(Nd) + 1]      # the body holds the rim around the pole
+        st[T_FRING] = F[3 * code_rim(Nd) + 1]  # the body holds the rim around the pole
     st[T_RMAX] = rmax
     st[T_PCONT] = pcont
     st[T_AOUT] = aout
@@ -428,12 +539,17 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
 
 @njit(cache=True, nogil=True)
 def body_terms(flags, st, U, P):
-    """Vehicle: returns (accel, thrust, body drag (signed, opposes U), ram, P_jet_out, P_other, m).
+    """
+    Vehicle: returns (accel, thrust, body drag (signed, opposes U), ram, P_jet_out, P_other, m).
 
     In the paper coupling the vehicle carries the shell's mass too (the shell is solved in the body
-    frame) and feels no force from the clamped ring: only thrust, drag and the ram of the inflow."""
+    frame) and feels no force from the clamped ring: only thrust, drag and the ram of the inflow.
+    """
     rho = P[P_RHO]
-    thr = 0.0; ram = 0.0; pj = 0.0; po = 0.0
+    thr = 0.0
+    ram = 0.0
+    pj = 0.0
+    po = 0.0
     m = P[P_MBODY]
     if flags & F_PAPER:
         m += P[P_MSHELL]
@@ -450,7 +566,9 @@ def body_terms(flags, st, U, P):
         acc = (thr + drag - ram) / m
     elif flags & F_CODE:
         if flags & F_BODY:
-            acc = (-ram + st[T_FRING]) / m   # thrust and drag reach the body through the clamped pole
+            acc = (
+                -ram + st[T_FRING]
+            ) / m  # thrust and drag reach the body through the clamped pole
     elif flags & F_BODY:
         acc = (thr + drag - ram + st[T_FRING]) / m
     return acc, thr, drag, ram, pj, po, m
@@ -458,18 +576,27 @@ def body_terms(flags, st, U, P):
 
 @njit(cache=True, nogil=True)
 def apply_minv(Nd, F, out):
-    """out = M^-1 F on free dofs (2x2 node blocks for (r, w), scalar for theta), 0 on fixed."""
+    """
+    Compute out = M^-1 F on free dofs, 0 on fixed.
+
+    M^-1 F on free dofs: 2x2 node blocks for (r, w), scalar for theta.
+    """
     n1 = Nd.shape[0]
     for i in range(n1):
         fr = F[3 * i] * (1.0 - Nd[i, N_FIXR])
         fz = F[3 * i + 1] * (1.0 - Nd[i, N_FIXZ])
-        a = Nd[i, N_MRR]; b = Nd[i, N_MRZ]; d = Nd[i, N_MZZ]
+        a = Nd[i, N_MRR]
+        b = Nd[i, N_MRZ]
+        d = Nd[i, N_MZZ]
         if Nd[i, N_FIXR] > 0.5 and Nd[i, N_FIXZ] > 0.5:
-            out[3 * i] = 0.0; out[3 * i + 1] = 0.0
+            out[3 * i] = 0.0
+            out[3 * i + 1] = 0.0
         elif Nd[i, N_FIXR] > 0.5:
-            out[3 * i] = 0.0; out[3 * i + 1] = fz / d
+            out[3 * i] = 0.0
+            out[3 * i + 1] = fz / d
         elif Nd[i, N_FIXZ] > 0.5:
-            out[3 * i] = fr / a; out[3 * i + 1] = 0.0
+            out[3 * i] = fr / a
+            out[3 * i + 1] = 0.0
         else:
             det = a * d - b * b
             out[3 * i] = (d * fr - b * fz) / det
@@ -479,20 +606,28 @@ def apply_minv(Nd, F, out):
 
 @njit(cache=True, nogil=True)
 def kinetic(Nd, v, U, P, V, flags):
-    """(shell kinetic incl. rotation, normal added-mass kinetic [included in the node mass blocks],
+    """
+    Return the kinetic energies.
+
+    (shell kinetic incl. rotation, normal added-mass kinetic [included in the node mass blocks],
     vehicle 1/2 M U^2, internal fluid 1/2 rho V U^2).  The node blocks are
-    M = m I + m_a n0 n0^T, so the added-mass part is split off with the shell's own mass m."""
+    M = m I + m_a n0 n0^T, so the added-mass part is split off with the shell's own mass m.
+    """
     n1 = Nd.shape[0]
     ksh = 0.0
     for i in range(n1):
         vr = v[3 * i] * (1.0 - Nd[i, N_FIXR])
         vz = v[3 * i + 1] * (1.0 - Nd[i, N_FIXZ])
         vt = v[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
-        ksh += 0.5 * (Nd[i, N_MRR] * vr * vr + 2 * Nd[i, N_MRZ] * vr * vz + Nd[i, N_MZZ] * vz * vz
-                      + Nd[i, N_MTT] * vt * vt)
+        ksh += 0.5 * (
+            Nd[i, N_MRR] * vr * vr
+            + 2 * Nd[i, N_MRZ] * vr * vz
+            + Nd[i, N_MZZ] * vz * vz
+            + Nd[i, N_MTT] * vt * vt
+        )
     kveh = 0.5 * P[P_MBODY] * U * U
     if flags & F_PAPER:
-        kveh += 0.5 * P[P_MSHELL] * U * U   # node velocities are relative to the body here
+        kveh += 0.5 * P[P_MSHELL] * U * U  # node velocities are relative to the body here
     if flags & F_JET:
         kint = 0.5 * P[P_RHO] * V * U * U
     else:
@@ -510,7 +645,7 @@ def band_lu(A, n, bw):
         if piv == 0.0 or not math.isfinite(piv):
             return False
         for i in range(k + 1, min(n, k + bw + 1)):
-            l = A[i, k - i + bw] / piv
+            l = A[i, k - i + bw] / piv  # noqa: E741
             if l == 0.0:
                 continue
             A[i, k - i + bw] = l
@@ -546,9 +681,13 @@ def fixed_dof(Nd, k):
 
 @njit(cache=True, nogil=True)
 def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
-    """Banded stiffness K = dF/dq (forward differences of the element forces, incl. the
-    geometric part) and damping C = dF/dv (exact viscous -B^T D_v B, drag 2x2 blocks).
-    The rank-one pressure term is handled separately (Sherman-Morrison)."""
+    """
+    Assemble the banded stiffness K = dF/dq and damping C = dF/dv.
+
+    K: forward differences of the element forces, incl. the geometric part; C: exact viscous
+    -B^T D_v B, drag 2x2 blocks. The rank-one pressure term is handled separately
+    (Sherman-Morrison).
+    """
     n1 = Nd.shape[0]
     ne = n1 - 1
     K[:, :] = 0.0
@@ -580,15 +719,30 @@ def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
             for i2 in range(6):
                 K[3 * e + i2, 3 * e + j - (3 * e + i2) + BW] += (f1[i2] - f0[i2]) / h
         if flags & F_VISC:
-            element_strain(q6, E[e, E_DS], E[e, E_R0M], E[e, E_LAM0], E[e, E_ETA0], E[e, E_K0],
-                           E[e, E_VS0], taud, B)
+            element_strain(
+                q6,
+                E[e, E_DS],
+                E[e, E_R0M],
+                E[e, E_LAM0],
+                E[e, E_ETA0],
+                E[e, E_K0],
+                E[e, E_VS0],
+                taud,
+                B,
+            )
             Ar = E[e, E_AREA]
             psi2 = P[P_PSI2]
             nu = P[P_NU]
             pj2 = psi2 * P[P_JS]
-            A[0, 0] = Ar * psi2; A[0, 1] = Ar * psi2 * nu; A[1, 0] = A[0, 1]; A[1, 1] = A[0, 0]
+            A[0, 0] = Ar * psi2
+            A[0, 1] = Ar * psi2 * nu
+            A[1, 0] = A[0, 1]
+            A[1, 1] = A[0, 0]
             A[2, 2] = Ar * P[P_GV]
-            A[3, 3] = Ar * pj2; A[3, 4] = Ar * pj2 * nu; A[4, 3] = A[3, 4]; A[4, 4] = A[3, 3]
+            A[3, 3] = Ar * pj2
+            A[3, 4] = Ar * pj2 * nu
+            A[4, 3] = A[3, 4]
+            A[4, 4] = A[3, 3]
             for i2 in range(6):
                 for j in range(6):
                     s = 0.0
@@ -638,8 +792,12 @@ def _check(q, v, n1, P):
 
 @njit(cache=True, nogil=True)
 def _paper_vehicle_midpoint(flags, st, U, alpha, dt, P):
-    """Paper coupling: the vehicle's midpoint speed U* of m (U* - U)/alpha = dt (T - D(U*) - ram(U*)),
-    with the thrust T of the shell's midpoint state (the shell does not feel U); scalar Newton."""
+    """
+    Paper coupling: solve for the vehicle's midpoint speed U*.
+
+    U* of m (U* - U)/alpha = dt (T - D(U*) - ram(U*)), with the thrust T of the shell's midpoint
+    state (the shell does not feel U); scalar Newton.
+    """
     Us = U
     for _ in range(20):
         a, thr, dr, ram, pj, po, m = body_terms(flags, st, Us, P)
@@ -682,7 +840,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     alpha = P[P_ALPHA]
     maxit = int(P[P_MAXIT])
     vprev = np.empty(n)
-    wz = np.zeros(n)     # paper_code: the axial load's weights (area shares), rank-one Jacobian term
+    wz = np.zeros(n)  # paper_code: the axial load's weights (area shares), rank-one Jacobian term
     if flags & F_CODE:
         kc = code_rim(Nd)
         aw = 0.0
@@ -690,7 +848,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             aw += Nd[i, N_DAREA]
         for i in range(kc, n1):
             wz[3 * i + 1] = Nd[i, N_DAREA] / aw
-    have_lu = False      # the factorised Newton matrix is reused across steps (modified Newton)
+    have_lu = False  # the factorised Newton matrix is reused across steps (modified Newton)
     for step in range(n_steps):
         t = time0 + step * dt
         for k in range(n):
@@ -705,7 +863,10 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             # velocity available at each kick)
             forces(flags, qn, vn, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st)
             a0, thr0, dr0, ram0, pj0, po0, m0 = body_terms(flags, st, U, P)
-            pv0 = st[T_PVISC]; pd0 = st[T_PDRAG] - dr0 * U; pa0 = st[T_PACT]; pc0 = st[T_PCONT]
+            pv0 = st[T_PVISC]
+            pd0 = st[T_PDRAG] - dr0 * U
+            pa0 = st[T_PACT]
+            pc0 = st[T_PCONT]
             apply_minv(Nd, F, acc)
             for k in range(n):
                 vs[k] = vn[k] + 0.5 * dt * acc[k]
@@ -736,11 +897,12 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             # The vehicle's midpoint speed U* is solved together with the shell (monolithic):
             # it takes the slot of the clamped ring's axial dof (rz), which keeps the system banded
             # because, by translation invariance, dF/dU* = alpha dt K[:, rz] + C[:, rz].
-            # monolithic vehicle only in the consistent coupling (the paper's is solved after the shell)
+            # monolithic vehicle only in the consistent coupling (the paper's is solved after the
+            # shell)
             body = (flags & F_BODY) != 0 and (flags & F_PAPER) == 0
             rz = 3 * (n1 - 1) + 1
             if flags & F_CODE:
-                rz = 3 * code_rim(Nd) + 1          # the clamped rim's axial slot carries the vehicle
+                rz = 3 * code_rim(Nd) + 1  # the clamped rim's axial slot carries the vehicle
             Us = U + alpha * dt * state[tail + S_A]
             if not body:
                 Us = 0.0
@@ -761,8 +923,12 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     Us = vs[rz]
                 for i in range(n1):
                     q1[3 * i] = qn[3 * i] + alpha * dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
-                    q1[3 * i + 1] = qn[3 * i + 1] + alpha * dt * (vs[3 * i + 1] - Us) * (1.0 - Nd[i, N_FIXZ])
-                    q1[3 * i + 2] = qn[3 * i + 2] + alpha * dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
+                    q1[3 * i + 1] = qn[3 * i + 1] + alpha * dt * (vs[3 * i + 1] - Us) * (
+                        1.0 - Nd[i, N_FIXZ]
+                    )
+                    q1[3 * i + 2] = qn[3 * i + 2] + alpha * dt * vs[3 * i + 2] * (
+                        1.0 - Nd[i, N_FIXT]
+                    )
                 forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
                 # residual R = M (v* - v_n)/alpha - dt F  (free dofs)
                 for i in range(n1):
@@ -797,7 +963,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         vs[k] += lam * dv[k]
                     continue
                 if rnorm > rprev and not fresh:
-                    have_lu = False     # even short steps fail: the Jacobian is stale
+                    have_lu = False  # even short steps fail: the Jacobian is stale
                 rprev = rnorm
                 lam = 1.0
                 if have_lu and (flags & F_JET) and (flags & F_CODE):
@@ -824,8 +990,8 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         J[3 * i + 1, BW] += Nd[i, N_MZZ] / alpha
                         J[3 * i + 2, BW] += Nd[i, N_MTT] / alpha
                     if body and (flags & F_CODE):
-                        # the pole slot carries the vehicle: its mass and the d/dU of ram (the drag's
-                        # d/dU acts on every wall node: left to the Newton iteration)
+                        # the pole slot carries the vehicle: its mass and the d/dU of ram (the
+                        # drag's d/dU acts on every wall node: left to the Newton iteration)
                         J[rz, BW] += (mb_ - Nd[(rz - 1) // 3, N_MZZ]) / alpha
                         if flags & F_JET:
                             J[rz, BW] += dt * P[P_RHO] * max(st[T_VDOT], 0.0)
@@ -833,7 +999,15 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         # the ring slot carries the vehicle: its mass and the d/dU of drag and ram
                         J[rz, BW] += (mb_ - Nd[n1 - 1, N_MZZ]) / alpha
                         if flags & F_DRAG:
-                            J[rz, BW] += dt * P[P_CD] * P[P_RHO] * math.pi * st[T_RMAX] * st[T_RMAX] * abs(Us)
+                            J[rz, BW] += (
+                                dt
+                                * P[P_CD]
+                                * P[P_RHO]
+                                * math.pi
+                                * st[T_RMAX]
+                                * st[T_RMAX]
+                                * abs(Us)
+                            )
                         if flags & F_JET:
                             J[rz, BW] += dt * P[P_RHO] * max(st[T_VDOT], 0.0)
                     for k in range(n):
@@ -883,7 +1057,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     converged = True
                     break
                 if (dmax > 0.3 * prev or it >= 6) and not fresh:
-                    have_lu = False   # slow contraction: refresh the Jacobian
+                    have_lu = False  # slow contraction: refresh the Jacobian
                 prev = dmax
             if not converged:
                 return step, ERR_NEWTON
@@ -891,18 +1065,21 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                 Us = vs[rz]
             for i in range(n1):
                 q1[3 * i] = qn[3 * i] + alpha * dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
-                q1[3 * i + 1] = qn[3 * i + 1] + alpha * dt * (vs[3 * i + 1] - Us) * (1.0 - Nd[i, N_FIXZ])
+                q1[3 * i + 1] = qn[3 * i + 1] + alpha * dt * (vs[3 * i + 1] - Us) * (
+                    1.0 - Nd[i, N_FIXZ]
+                )
                 q1[3 * i + 2] = qn[3 * i + 2] + alpha * dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
             forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
-            Ush = Us     # the frame speed the shell's kinematics use (0 in the paper coupling)
+            Ush = Us  # the frame speed the shell's kinematics use (0 in the paper coupling)
             if flags & F_PAPER:
                 if flags & F_BODY:
                     Us = _paper_vehicle_midpoint(flags, st, U, alpha, dt, P)
                 acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
                 # what the consistent wall pressure would have charged the shell for the outflow:
-                # the jet's kinetic energy flux in the body frame, 1/2 rho A u^3 (docs/PHYSICS_SHELL.md,
-                # "The ledger of the paper coupling").  On inflow nothing is created: no suction acts
-                # on the wall and the inflow jet's kinetic energy is not booked out either
+                # the jet's kinetic energy flux in the body frame, 1/2 rho A u^3
+                # (docs/PHYSICS_SHELL.md, "The ledger of the paper coupling").  On inflow nothing
+                # is created: no suction acts on the wall and the inflow jet's kinetic energy is
+                # not booked out either
                 if (flags & F_JET) and st[T_VDOT] < 0.0:
                     uj_ = -st[T_VDOT] / st[T_AOUT]
                     state[tail + S_CREATED] += dt * 0.5 * P[P_RHO] * st[T_AOUT] * uj_ * uj_ * uj_
@@ -912,16 +1089,20 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             else:
                 acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
                 if flags & F_CODE:
-                    # as in the paper coupling no cavity pressure pays for the jet; and the thrust, the
-                    # refill force and the drag work at the wall's speed, not the vehicle's
+                    # as in the paper coupling no cavity pressure pays for the jet; and the thrust,
+                    # the refill force and the drag work at the wall's speed, not the vehicle's
                     # (docs/PHYSICS_SHELL.md, "Experiment E")
                     if (flags & F_JET) and st[T_VDOT] < 0.0:
                         uj_ = -st[T_VDOT] / st[T_AOUT]
-                        state[tail + S_CREATED] += dt * 0.5 * P[P_RHO] * st[T_AOUT] * uj_ * uj_ * uj_
+                        state[tail + S_CREATED] += (
+                            dt * 0.5 * P[P_RHO] * st[T_AOUT] * uj_ * uj_ * uj_
+                        )
                     elif flags & F_JET:
                         uin_ = st[T_VDOT] / P[P_AIN]
                         po -= 0.5 * P[P_RHO] * P[P_AIN] * uin_ * uin_ * uin_
-                    state[tail + S_CREATED_WALL] += dt * ((thr + dr) * st[T_WREL] + st[T_FREF] * (Us + st[T_WREL]))
+                    state[tail + S_CREATED_WALL] += dt * (
+                        (thr + dr) * st[T_WREL] + st[T_FREF] * (Us + st[T_WREL])
+                    )
             for i in range(n1):
                 q1[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
                 q1[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Ush) * (1.0 - Nd[i, N_FIXZ])
@@ -962,18 +1143,25 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
 
 @njit(cache=True, nogil=True)
 def advance(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
-    """Advance ``state`` in place by ``n_steps``; returns (steps done, status code).  The state
-    is only written after a step passed its checks, so it is left at the last good step.
-    ``flags`` is a runtime value here: one compilation (~20 s, cached on disk) serves every scene."""
+    """
+    Advance ``state`` in place by ``n_steps``; returns (steps done, status code).
+
+    The state is only written after a step passed its checks, so it is left at the last good step.
+    ``flags`` is a runtime value here: one compilation (~20 s, cached on disk) serves every scene.
+    """
     return _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
 
 
 @njit(cache=True, nogil=True)
 def advance_specialised(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
-    """Same as ``advance`` with ``flags`` forced to a compile-time literal: the switched-off terms
+    """
+    Advance like ``advance``, with ``flags`` forced to a compile-time literal.
+
+    Same as ``advance`` with ``flags`` forced to a compile-time literal: the switched-off terms
     are compiled out (measured +15-40 % speed on the robot scene) at the price of one ~20 s
     compilation per distinct flag set (cached on disk).  Selected by
-    ``simulation.specialise_kernel: true``."""
+    ``simulation.specialise_kernel: true``.
+    """
     return _advance_impl(literally(flags), state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
 
 
@@ -987,7 +1175,7 @@ def evaluate(flags, state, t, amp_cmd, E, Nd, P):
     vrel = np.zeros(n)
     st = np.zeros(N_STATS)
     U = state[6 * n1 + S_U]
-    Ush = 0.0 if flags & F_PAPER else U   # the paper coupling's shell lives in the body frame
+    Ush = 0.0 if flags & F_PAPER else U  # the paper coupling's shell lives in the body frame
     forces(flags, state[:n], state[n:2 * n], Ush, t, amp_cmd, E, Nd, P, F, gV, vrel, st)
     ksh, kveh, kint = kinetic(Nd, state[n:2 * n], U, P, st[T_VOL], flags)
     return st, ksh, kveh, kint
