@@ -78,7 +78,7 @@ ROUTINE_FIELDS = {
     'release_s': 's of the half-cosine release of the pull',
 }
 INTEGER_FIELDS = ('cycles',)
-#: routine kind -> field -> pulsejet_sim.schema.Number (default, range)
+#: routine kind -> field -> pulsejet_sim.models.schema.Number (default, range)
 ROUTINE_SPECS = {'pump_valve': _routines.PUMP_VALVE_SPEC, 'cable': _routines.CABLE_SPEC}
 #: wall seconds between re-sends of the t = 0 command while the ROS clock reads 0 (not started)
 STANDBY_PERIOD_S = 0.2

@@ -243,7 +243,7 @@ def dotted_overrides(values: dict[str, float]) -> dict:
 def load_fit(path: str | Path) -> FitSpec:
     """Read and validate a fit file (a path, or a name under config/fits/)."""
     from pulsejet_sim.scene import load_scene_data, merge, resolve_scene_path, SceneError
-    from pulsejet_sim.schema import read_config_file
+    from pulsejet_sim.models.schema import read_config_file
 
     p, data = read_config_file(path, 'fits', 'fit file', FitError)
     if not isinstance(data, dict):

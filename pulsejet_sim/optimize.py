@@ -295,7 +295,7 @@ def _number(value: Any, where: str, allowed: str, positive: bool = False) -> flo
 def load_optimize(path: str | Path) -> OptimizeSpec:
     """Read and validate an optimisation file (a path, or a name under config/optimize/)."""
     from pulsejet_sim.scene import load_scene, SceneError
-    from pulsejet_sim.schema import read_config_file
+    from pulsejet_sim.models.schema import read_config_file
 
     p, data = read_config_file(path, 'optimize', 'optimisation file', OptimizeError)
     if not isinstance(data, dict):

@@ -207,7 +207,7 @@ def stored_scene_data(path: str | Path, info: BagInfo | None = None) -> dict[str
     already filled it (no second pass over the file). The stored YAML is untrusted: read with the
     safe loader; callers take only plain numbers and names from it.
     """
-    from pulsejet_sim.schema import safe_load_yaml, YAMLInputError
+    from pulsejet_sim.models.schema import safe_load_yaml, YAMLInputError
 
     if info is not None and info.metadata:
         found: dict[str, str] = {}

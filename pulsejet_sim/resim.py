@@ -265,7 +265,7 @@ def stored_scene(path: str | Path) -> Any | None:
     """
     from pulsejet_sim.bag.reader import read_metadata
     from pulsejet_sim.scene import is_project_scene_name, load_scene, scene_from_stored, SceneError
-    from pulsejet_sim.schema import show
+    from pulsejet_sim.models.schema import show
 
     found = read_metadata(path, METADATA_NAME)
     try:

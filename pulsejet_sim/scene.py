@@ -16,7 +16,7 @@ from typing import Any
 
 from pulsejet_sim.models import build_model
 from pulsejet_sim.models.base import Command, ModelError
-from pulsejet_sim.schema import Number, read_yaml_file, safe_load_yaml, show, YAMLInputError
+from pulsejet_sim.models.schema import Number, read_yaml_file, safe_load_yaml, show, YAMLInputError
 
 DEFAULT_SCENE = 'shell_robot'  # the design card's default: the shell mantle
 

@@ -243,7 +243,7 @@ class SimNode(Node):
     def __init__(self, **kwargs):
         super().__init__('sim_node', **kwargs)
         from pulsejet_sim.scene import load_scene
-        from pulsejet_sim.schema import safe_load_yaml, YAMLInputError
+        from pulsejet_sim.models.schema import safe_load_yaml, YAMLInputError
         from pulsejet_sim.simulation import Simulation
         import yaml
 

@@ -133,7 +133,7 @@ def run_one(spec: RunSpec) -> RunRow:
 
 def load_sweep(path: str | os.PathLike) -> tuple[dict, list[RunSpec]]:
     """Read a sweep file and expand it into runs."""
-    from pulsejet_sim.schema import read_config_file
+    from pulsejet_sim.models.schema import read_config_file
 
     p, data = read_config_file(path, 'sweeps', 'sweep', SweepError)
     if not isinstance(data, dict) or 'studies' not in data:

@@ -23,7 +23,7 @@ from pulsejet_sim.models.base import (
     SimulationBlowUp,
     VALVE_MIN_OPENING,
 )
-from pulsejet_sim.schema import check_section, Choice, Flag, Number
+from pulsejet_sim.models.schema import check_section, Choice, Flag, Number
 from scipy import integrate
 
 TERM_BITS = {
