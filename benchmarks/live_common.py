@@ -207,12 +207,15 @@ class ParamProbe:
     """
     Time sim_node's parameter services as `ros2 param dump` uses them.
 
-    First list_parameters, then get_parameters of every listed name. A round that does not finish
-    in `timeout_s` is a starved service; the prober waits for it (it never sends a second round on
-    top of a pending one).
+    First list_parameters, then get_parameters of every listed name; a round starts every
+    `period_s` (as a user or a monitoring script would dump them, not back to back). A round that
+    does not finish in `timeout_s` is a starved service; the prober waits for it (it never sends
+    a second round on top of a pending one).
     """
 
-    def __init__(self, node, target: str = '/sim_node', timeout_s: float = 10.0):
+    def __init__(
+        self, node, target: str = '/sim_node', timeout_s: float = 10.0, period_s: float = 1.0
+    ):
         from rcl_interfaces.srv import GetParameters, ListParameters
 
         self._list = node.create_client(ListParameters, f'{target}/list_parameters')
@@ -220,6 +223,8 @@ class ParamProbe:
         self.timeout_s = timeout_s
         self.latencies_s: list[float] = []
         self.starved = 0
+        self.period_s = period_s
+        self._next_round = 0.0
         self._pending = None  # (future, started wall s, stage)
 
     def poll(self) -> None:
@@ -229,7 +234,8 @@ class ParamProbe:
         now = time.monotonic()
         p = self._pending
         if p is None:
-            if self._list.service_is_ready():
+            if now >= self._next_round and self._list.service_is_ready():
+                self._next_round = now + self.period_s
                 self._pending = {
                     'future': self._list.call_async(ListParameters.Request()),
                     'started': now,

@@ -7,9 +7,10 @@ log line, a fault) and `sim_node` turns them into messages; tests drive it with 
 
 Pacing modes (`PACING_MODES`):
 - ``real_time``: physics steps follow the wall clock times ``real_time_factor`` on a drift-free
-  grid; at most ``MAX_CATCH_UP_PERIODS`` publication periods are caught up in one tick, the rest
-  of a late wall interval is *dropped* (counted in ``dropped_wall_s`` and in the health numbers,
-  never silently).
+  grid; a late tick catches up at most ``MAX_CATCH_UP_PERIODS`` publication periods or
+  ``MAX_CATCH_UP_S`` of wall time, whichever is longer (at 1 kHz five periods are shorter than one
+  scheduling hiccup of a loaded machine); the rest of a late wall interval is *dropped* (counted
+  in ``dropped_wall_s`` and in the health numbers, never silently).
 - ``as_fast_as_possible``: each tick steps for ``AFAP_BUDGET`` of a publication period.
 - ``lockstep``: time advances only through `step` (``step_count`` steps per call).
 - ``closed_loop``: lockstep with the controller: after every control period the state is
@@ -39,6 +40,7 @@ SAFE_COMMAND = Command(pump_flow_m3_s=0.0, valve_opening=1.0, cable_force_n=0.0)
 LEDGER_RATE_HZ = 5.0
 HOLD_REPUBLISH_S = 0.5
 MAX_CATCH_UP_PERIODS = 5
+MAX_CATCH_UP_S = 0.05
 DROP_LOG_PERIOD_S = 10.0  # at most one "fell behind" log line per this many wall seconds
 AFAP_BUDGET = 0.8
 RTF_WARN_FRACTION = 0.9
@@ -235,8 +237,11 @@ class Session:
         if self._pacer is not None:
             self.dropped_wall_s += self._pacer.dropped_s
         # the pacer counts publication periods, so that every state lies on the physics step's grid
+        wall_periods = max(
+            MAX_CATCH_UP_PERIODS, math.ceil(MAX_CATCH_UP_S * self.config.publish_rate_hz - 1e-9)
+        )
         max_periods = (
-            max(1, int(math.ceil(MAX_CATCH_UP_PERIODS * self.config.real_time_factor)))
+            max(1, int(math.ceil(wall_periods * self.config.real_time_factor)))
             + self._lookahead_periods()
         )
         self._pacer = Pacer(
