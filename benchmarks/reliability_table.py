@@ -299,7 +299,8 @@ def soak_row() -> tuple:
     return (
         what + f"; `{stored['command']}`",
         f"{r['minutes']:g} min",
-        'load of a closed loop at 1 kHz; parameter dump rounds throughout',
+        f"1 kHz of state with {r.get('controller', 'every_state')} closed-loop control; "
+        'a parameter dump (list + get) every second',
         ('met' if not stored['misses'] else 'MISSED: ' + '; '.join(stored['misses']))
         + f": RTF {r['rtf']:.4f}, watchdog trips {r['watchdog_trips']}, memory {growth}, "
         f"parameter rounds {r['param_services']['rounds']} "

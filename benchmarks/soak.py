@@ -2,12 +2,15 @@
 Soak: sim_node publishing at 1 kHz in real time with a closed-loop controller, for minutes.
 
     .venv/bin/python benchmarks/soak.py [--minutes 10] [--rate-hz 1000] [--scene pump_cycle]
+                                        [--controller routine|every_state] [--warm-up-s 60]
                                         [--record] [--no-write]
 
 sim_node (real_time pacing, command watchdog on: 0.1 s of simulated time, safe action) and
-controller_node (closed_loop: it answers every published state with one atomic command, and its
-pump/valve routine inflates to a target volume it measures) run as processes in an isolated ROS
-domain with localhost discovery; with --record the recorder node writes /clock, the applied
+controller_node run as processes in an isolated ROS domain with localhost discovery. The
+controller closes the loop on the measured volume (its pump/valve routine inflates to a target
+volume): `routine` (default) sends its commands at its own rate (50 Hz of simulated time),
+`every_state` answers every published state with one atomic command (closed_loop:=true, 1000
+commands a second at 1 kHz); with --record the recorder node writes /clock, the applied
 commands and /diagnostics to MCAP (read back at the end with rosbags). This process
   - receives /clock and measures the real-time factor held (simulated s / wall s) over the whole
     soak after a warm-up minute, and over each minute;
@@ -48,8 +51,12 @@ from live_common import (  # noqa: E402
 )
 from pulsejet_sim import interface  # noqa: E402
 
-WARM_UP_S = float(__import__('os').environ.get('SOAK_WARM_UP_S', 60.0))
 RSS_PERIOD_S = 10.0
+CONTROLLERS = {
+    'routine': 'controller_node, pump/valve routine on the measured volume, commands at 50 Hz of '
+    'simulated time',
+    'every_state': 'controller_node closed_loop:=true, one atomic command per published state',
+}
 RTF_TOLERANCE = 0.01
 RSS_GROWTH_LIMIT = 0.05
 RECORDED_TOPICS = [
@@ -72,12 +79,21 @@ def rtf_over(clock: list, t0_wall: float, t1_wall: float) -> float:
     return (s1 - s0) / (w1 - w0)
 
 
-def soak(minutes: float, rate_hz: float, scene: str, record: bool, domain: int, tmp: Path) -> dict:
+def soak(
+    minutes: float,
+    rate_hz: float,
+    scene: str,
+    record: bool,
+    domain: int,
+    tmp: Path,
+    controller: str = 'routine',
+    warm_up_s: float = 60.0,
+) -> dict:
     env = node_env(domain)
     procs = {
         'controller_node': NodeProcess(
             'pulsejet_ctrl.controller_node',
-            {'scene': scene, 'closed_loop': True},
+            {'scene': scene, 'closed_loop': controller == 'every_state'},
             tmp / 'controller_node.log',
             env,
         ),
@@ -117,7 +133,7 @@ def soak(minutes: float, rate_hz: float, scene: str, record: bool, domain: int, 
         )
         start = time.monotonic()
         cpu0 = {name: cpu_seconds(p.pid) for name, p in procs.items()}
-        end = start + WARM_UP_S + minutes * 60.0
+        end = start + warm_up_s + minutes * 60.0
         next_rss = start
         while time.monotonic() < end:
             client.executor.spin_once(timeout_sec=0.005)
@@ -138,7 +154,7 @@ def soak(minutes: float, rate_hz: float, scene: str, record: bool, domain: int, 
     finally:
         exit_codes = {name: p.stop() for name, p in reversed(list(procs.items()))}
         client.close()
-    measured0 = start + WARM_UP_S
+    measured0 = start + warm_up_s
     clock = client.watch.clock_wall
     minute_rtf = [
         rtf_over(clock, measured0 + 60.0 * k, measured0 + 60.0 * (k + 1))
@@ -151,7 +167,7 @@ def soak(minutes: float, rate_hz: float, scene: str, record: bool, domain: int, 
     nominal = 1.0 / rate_hz
     growth = {}
     for name, samples in rss.items():
-        after = [v for t, v in samples if t >= WARM_UP_S]
+        after = [v for t, v in samples if t >= warm_up_s]
         growth[name] = (
             (
                 (after[-1] - after[0]) / after[0],
@@ -163,6 +179,8 @@ def soak(minutes: float, rate_hz: float, scene: str, record: bool, domain: int, 
             else (float('nan'),) * 4
         )
     result = {
+        'controller': controller,
+        'warm_up_s': warm_up_s,
         'scene': scene,
         'rate_hz': rate_hz,
         'minutes': minutes,
@@ -228,7 +246,8 @@ def table(r: dict) -> str:
     p = r['param_services']
     rows = [
         ('scene, publication rate', f"{r['scene']}, {r['rate_hz']:g} Hz"),
-        ('soak length (after a 60 s warm-up)', f"{r['minutes']:g} min"),
+        ('controller', CONTROLLERS[r['controller']]),
+        ('soak length (after the warm-up)', f"{r['minutes']:g} min (+ {r['warm_up_s']:g} s)"),
         ('real-time factor held (target 1.00 +- 0.01)', f"{r['rtf']:.4f}"),
         (
             'real-time factor, worst / best minute',
@@ -283,6 +302,18 @@ def main(argv=None) -> int:
     ap.add_argument('--rate-hz', type=float, default=1000.0, help="sim_node's publication rate")
     ap.add_argument('--scene', default='pump_cycle')
     ap.add_argument(
+        '--controller',
+        choices=list(CONTROLLERS),
+        default='routine',
+        help='how controller_node closes the loop (default routine)',
+    )
+    ap.add_argument(
+        '--warm-up-s',
+        type=float,
+        default=60.0,
+        help='wall seconds before the measurement starts (default 60)',
+    )
+    ap.add_argument(
         '--record', action='store_true', help='also run the recorder and read its file back'
     )
     ap.add_argument('--no-write', action='store_true', help='print only')
@@ -291,7 +322,14 @@ def main(argv=None) -> int:
         ap.error(f'--minutes {args.minutes}: must be >= 1')
     with tempfile.TemporaryDirectory(prefix='pulsejet_soak_') as tmp:
         r = soak(
-            args.minutes, args.rate_hz, args.scene, args.record, default_domain_id(), Path(tmp)
+            args.minutes,
+            args.rate_hz,
+            args.scene,
+            args.record,
+            default_domain_id(),
+            Path(tmp),
+            args.controller,
+            args.warm_up_s,
         )
     command = 'python benchmarks/soak.py ' + ' '.join(sys.argv[1:] if argv is None else argv)
     misses = verdicts(r)
