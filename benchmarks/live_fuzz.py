@@ -326,6 +326,7 @@ def fuzz_scene(
     tracebacks = log.count('Traceback')
     diag = client.watch.diagnostics
     faults = sum(1 for _, level, msg, values in diag if level == 2)
+    fault_messages = sorted({msg for _, level, msg, _ in diag if level == 2})[:5]
     sent_total = flood.sent['actuator'] + flood.sent['atomic'] + flood.sent['duplicate']
     base = rss[0][1] if rss else float('nan')
     last = rss[-1][1] if rss else float('nan')
@@ -343,6 +344,7 @@ def fuzz_scene(
         'nan_published': client.watch.non_finite,
         'nan_examples': client.watch.examples,
         'error_diagnostics': faults,
+        'error_messages': fault_messages,
         'restarts_needed': restarts,
         'crash_tails': crash_tails,
         'tracebacks_in_log': tracebacks,
@@ -457,6 +459,8 @@ def main(argv=None) -> int:
     for r in results:
         for tail in r['crash_tails']:
             text += f'\nsim_node died ({r["scene"]}):\n```\n{tail}\n```\n'
+        for message in r.get('error_messages', []):
+            text += f'\nERROR diagnostic ({r["scene"]}): {message}\n'
         for example in r['nan_examples']:
             text += f'\nnon-finite ({r["scene"]}): {example}\n'
     if args.no_write:
