@@ -678,10 +678,16 @@ class Session:
             if (self._pacer is not None and state == 'running' and cfg.pacing == 'real_time')
             else 0.0
         )
-        try:
-            margin = float(self.sim.stable_step_s()) / self.dt_s
-        except Exception:  # a model that cannot estimate it at this state
-            margin = float('nan')
+        integrator = str(getattr(self.sim.model, 'integrator', 'explicit'))
+        implicit = 'implicit' in integrator or 'backward' in integrator
+        margin = float('nan')
+        if not implicit:
+            # only an explicit step has a stable bound to warn about; for the shell the estimate is
+            # an eigenvalue solve that holds the GIL for tens of ms (a publication stall a second)
+            try:
+                margin = float(self.sim.stable_step_s()) / self.dt_s
+            except Exception:  # a model that cannot estimate it at this state
+                pass
         ledger = self.sim.energy_ledger()
         closure_j = float(ledger.get('closure_error', float('nan')))
         in_play = (
@@ -736,9 +742,7 @@ class Session:
                 'exceeds '
                 f'{CLOSURE_WARN_RELATIVE:.0%}'
             )
-        integrator = str(getattr(self.sim.model, 'integrator', 'explicit'))
         values['integrator'] = integrator
-        implicit = 'implicit' in integrator or 'backward' in integrator
         if math.isfinite(margin) and margin < STABLE_MARGIN_WARN and not implicit:
             warn.append(f'step above the stable step (margin {margin:.3g})')
         if (
