@@ -554,12 +554,13 @@ class SimNode(Node):
             calls.append(functools.partial(self._pubs[topic].publish, msg))
         if ledger:
             calls += self._ledger_publication(obs.time_s)
-            if (
-                profile is not None
-            ):  # the 3-D view at the ledger's rate, in the odometry's body frame
+            marker = self._pubs.get(messages.TOPIC_MANTLE_MARKER)
+            # the 3-D view at the ledger's rate, in the odometry's body frame, and only while
+            # someone looks: its ~14000 points take ~15 ms of the GIL to build and send
+            if profile is not None and marker is not None and marker.get_subscription_count():
                 calls.append(
                     functools.partial(
-                        self._pubs[messages.TOPIC_MANTLE_MARKER].publish,
+                        marker.publish,
                         messages.mantle_marker(*profile, obs.time_s, self.frames[1]),
                     )
                 )
