@@ -454,9 +454,8 @@ class SimNode(Node):
                     if now >= next_tick:
                         self._emit(self._tick(now))
                         next_tick += period
-                        if (
-                            next_tick < now - period
-                        ):  # more than a period late: restart the grid (no burst)
+                        # more than a period late: restart the grid (no burst)
+                        if next_tick < now - period:
                             next_tick = now
             except Exception as exc:  # a bug: report it, stop the node with a failure
                 import traceback
