@@ -270,15 +270,18 @@ def read_config_file(path: Any, folder: str, what: str, error: type) -> tuple[An
     """
     from pathlib import Path
 
+    from pulsejet_sim.scene import config_dirs  # the one place that knows where config/ is
+
     p = Path(path)
     if not p.is_file():
-        builtin = Path(__file__).resolve().parent.parent / 'config' / folder / f'{path}.yaml'
-        if not builtin.is_file():
+        builtin = [d / folder / f'{path}.yaml' for d in config_dirs()]
+        builtin = [b for b in builtin if b.is_file()]
+        if not builtin:
             raise error(
                 f'{what} {str(path)!r} not found; allowed: a YAML path or a name under '
                 f'config/{folder}/'
             )
-        p = builtin
+        p = builtin[0]
     try:
         return p, read_yaml_file(p, f'{what} {str(p)!r}')
     except YAMLInputError as err:
