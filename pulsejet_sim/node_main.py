@@ -15,6 +15,7 @@ import traceback
 from typing import Callable
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -22,6 +23,24 @@ from rclpy.node import Node
 #: after the node says it is done, keep spinning this long so the last samples reach reliable
 #: subscribers before the writers go away
 DRAIN_S = 0.3
+#: and wait at most this long (wall time) for every reliable subscriber to acknowledge them: on a
+#: loaded machine a sample lost on first send is repeated only on the reader's request, which a
+#: writer that has gone away never answers (a recording would miss the final state)
+ACK_TIMEOUT_S = 5.0
+
+
+def wait_for_acknowledgements(node: Node, timeout_s: float) -> bool:
+    """
+    Wait until every reliable subscriber acknowledged all of the node's publications.
+
+    Bounded by ``timeout_s`` in total; False when a subscriber had not acknowledged by then.
+    """
+    end = time.monotonic() + timeout_s
+    acked = True
+    for publisher in node.publishers:
+        left = max(0.0, end - time.monotonic())
+        acked = publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and acked
+    return acked
 
 
 def run_node(name: str, make_node: Callable[[], Node], args=None) -> int:
@@ -56,6 +75,7 @@ def run_node(name: str, make_node: Callable[[], Node], args=None) -> int:
             executor.spin_once(timeout_sec=0.05)
         code = getattr(node, 'exit_code', 0)
         if getattr(node, 'done', False):
+            wait_for_acknowledgements(node, ACK_TIMEOUT_S)
             end = time.monotonic() + DRAIN_S
             while running() and time.monotonic() < end:
                 executor.spin_once(timeout_sec=0.05)

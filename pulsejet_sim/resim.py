@@ -17,9 +17,12 @@ it holds, stamped with the simulation time from which it holds it.
 Times of the recorded states: the header stamp where the message has one (TwistStamped). Float64
 topics have none; their log time is used when it is simulation time (offline runner: log time ==
 simulation time, detected from /clock or the velocity stamps). For a live recording (log time =
-wall-clock receive time) the log time is mapped onto simulation time through the recorded /clock
-and snapped to the nearest stamped observation time (the simulator publishes every state topic
-of one observation together); `ResimResult.time_source` says which was used.
+wall-clock receive time) whose topic holds as many messages as the stamped velocity, in strictly
+increasing stamps, the k-th message is the k-th state (the simulator publishes every state topic
+of one observation together, reliably); otherwise the log time is mapped onto simulation time
+through the recorded /clock and snapped to the nearest stamped observation time, which can pick a
+neighbouring state when states arrive a few ms apart. `ResimResult.time_source` says which was
+used.
 
 Scene: the `scene` argument, else one stored in the file (an MCAP metadata record `pulsejet` with
 key `scene_yaml` = the complete scene as YAML, or `scene` = a scene name or path); else ResimError.
@@ -87,7 +90,7 @@ class ResimResult:
     commands: list[tuple[int, Command]]  # (step index from which held, command)
     topics: dict[str, TopicComparison]  # relative topic -> comparison
     steps: int  # physics steps re-simulated
-    time_source: str  # 'log time' | 'clock-mapped' for Float64 topics
+    time_source: str  # Float64 topics: 'log time' | 'publication order' | 'clock-mapped'
     fault: str | None = None  # SimulationBlowUp during re-simulation
     warnings: list[str] = field(default_factory=list)
     out_path: Path | None = None
@@ -240,18 +243,38 @@ def read_recorded_states(path: str | Path) -> RecordedStates:
                 t = float(cands[np.argmin(np.abs(cands - t))])
             return t
 
+    # A live recording that holds every state in order: the k-th message of an unstamped topic is
+    # the k-th observation (sim_node publishes each state's topics together over reliable
+    # transport), which is exact where a receive time mapped through /clock is not (at a high
+    # real-time factor states arrive a few ms apart and receive times of topics interleave).
+    velocity_stamps = [t for _, t, _ in raw[VELOCITY] if t is not None]
+    in_order = (
+        not log_is_sim
+        and len(velocity_stamps) == len(raw[VELOCITY]) > 0
+        and all(b > a for a, b in zip(velocity_stamps, velocity_stamps[1:]))
+    )
     values: dict[str, list[tuple[float, float]]] = {}
+    sources = set()
     for rel, items in raw.items():
         if topics[rel] is None:
             continue
         out = []
-        for ns, t, v in items:
+        by_order = in_order and len(items) == len(velocity_stamps)
+        for k, (ns, t, v) in enumerate(items):
             if t is None:
-                t = ns * 1e-9 if log_is_sim else to_sim(ns * 1e-9)
+                if log_is_sim:
+                    t = ns * 1e-9
+                elif by_order:
+                    t = velocity_stamps[k]
+                    sources.add('publication order')
+                else:
+                    t = to_sim(ns * 1e-9)
+                    sources.add('clock-mapped')
             out.append((t, v))
         values[rel] = out
     first = min((t for items in values.values() for t, _ in items), default=None)
-    return RecordedStates(values, 'log time' if log_is_sim else 'clock-mapped', first)
+    source = 'log time' if log_is_sim else ' and '.join(sorted(sources)) or 'header stamps'
+    return RecordedStates(values, source, first)
 
 
 def stored_scene(path: str | Path) -> Any | None:

@@ -511,8 +511,8 @@ class SimNode(Node):
                 )
                 if self._outbox.pending():  # right after the last state computed without it
                     self._outbox.put(self._outbox_due, [call])
-                else:
-                    call()
+                else:  # after a batch the outbox thread may be sending right now
+                    self._send_now([call])
             elif isinstance(e, eng.PublishLedger):
                 self._send_now(self._ledger_publication(e.time_s))
             elif isinstance(e, eng.Log):  # one call site per severity (rclpy requires it)

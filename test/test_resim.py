@@ -41,18 +41,23 @@ def rewrite(
     dst: Path,
     transform: Callable[[str, int, bytes], tuple[int, bytes]],
     metadata: dict[str, str] | None = None,
+    keep: Callable[[str, int], bool] = lambda topic, index: True,
 ) -> Path:
     """
     Copy a recording message by message through transform.
 
-    transform(topic, log_ns, cdr) -> (log_ns, cdr).
+    transform(topic, log_ns, cdr) -> (log_ns, cdr); keep(topic, index within the topic) -> bool.
     """
     info = BagInfo(src)
     msgs = list(iter_bag(src, info=info, decode=False))
     with BagWriter(dst) as bag:
         for topic, type_name in info.topics.items():
             bag.add_topic(topic, type_name, definition=info.definitions[type_name])
+        seen: dict[str, int] = {}
         for m in msgs:
+            index = seen[m.topic] = seen.get(m.topic, -1) + 1
+            if not keep(m.topic, index):
+                continue
             log_ns, cdr = transform(m.topic, m.log_time_ns, m.msg)
             bag.write(m.topic, cdr, log_ns)
         if metadata:
@@ -168,7 +173,39 @@ def test_live_style_recording_with_receive_times_and_stored_scene(
     )
     result = resimulate(live)
     assert result.scene_name == 'pump_cycle'
-    assert result.time_source == 'clock-mapped'
+    assert result.time_source == 'publication order'  # every state there: k-th is k-th
+    assert result.bit_identical, result.format_table()
+
+    # one volume lost: that topic is placed through /clock instead, still on the right states
+    gap = rewrite(
+        live,
+        tmp_path / 'gap.mcap',
+        lambda topic, ns, cdr: (ns, cdr),
+        metadata={'scene': 'pump_cycle'},
+        keep=lambda topic, index: not (topic == '/pulsejet/volume' and index == 3),
+    )
+    result = resimulate(gap)
+    assert result.time_source == 'clock-mapped and publication order'
+    assert result.topics['pulsejet/volume'].compared == int(DURATION_S * 100)
+    assert result.topics['pulsejet/volume'].max_abs_error == 0.0, result.format_table()
+
+
+def test_live_recording_states_placed_by_publication_order(
+    recording: Path, tmp_path: Path
+) -> None:
+    """
+    Float64 states received 1.5 periods late are still the right states (a fast live run).
+
+    Receive times then name the wrong observation through /clock; publication order does not.
+    """
+
+    def late_floats(topic: str, log_ns: int, cdr: bytes) -> tuple[int, bytes]:
+        late = 15_000_000 if topic in ('/pulsejet/volume', '/pulsejet/mantle_radius') else 0
+        return 1_764_000_000_000_000_000 + log_ns + late, cdr
+
+    live = rewrite(recording, tmp_path / 'late.mcap', late_floats)
+    result = resimulate(live, 'pump_cycle')
+    assert result.time_source == 'publication order'
     assert result.bit_identical, result.format_table()
 
 

@@ -581,6 +581,9 @@ class Session:
         self.paused = False
         if self._pacer is not None:
             self._reanchor(now)
+        if was and self.started:
+            # a recorder that joined during the pause missed the held command: say it again
+            self._publish_applied(self.command)
         msg = ('resumed' if was else 'already running') + f' at t={self.sim.time_s:.6f} s'
         if self.sim.fault is not None:
             msg += f' (the physics is stopped after a fault; call {SERVICE_RESET})'
