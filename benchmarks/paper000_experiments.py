@@ -48,7 +48,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import paper000_study as study  # noqa: E402
-from pulsejet_sim.sweep import load_sweep, merge, RunRow, RunSpec  # noqa: E402
+from pulsejet_sim.sweep import load_sweep, merge, run_one, RunRow, RunSpec  # noqa: E402
 
 FINER = {
     'mesh': {'elements': 384},
@@ -200,44 +200,21 @@ def measure(spec: RunSpec) -> RunRow:
     """
     Measure sweep.run_one's metrics plus the smallest radius of the mantle's edge node.
 
-    The metrics are the study's columns, computed the same way; the radius is the smallest of the
-    mantle's edge node over the run.
+    The metrics are the study's columns, computed by sweep.run_one; the radius is the smallest of
+    the mantle's edge node over the run.
     """
-    from pulsejet_sim.runner import Drive
-    from pulsejet_sim.scene import load_scene
+    edge = []
+    model = None
 
-    row = RunRow(name=spec.name, study=spec.study, labels=dict(spec.labels))
-    try:
-        drive = Drive(
-            load_scene(spec.scene, dict(spec.overrides), replace=spec.replace), spec.duration_s
-        )
-    except ValueError as err:
-        row.fault = f'refused: {err}'
-        return row
-    start = time.perf_counter()
-    speeds, thrusts, volumes, edge = [], [], [], []
-    model = drive.sim.model
-    for _, _, obs in drive:
-        speeds.append(obs.velocity_m_s)
-        thrusts.append(obs.thrust_n)
-        volumes.append(obs.volume_m3)
-        edge.append(float(model.profile(drive.sim.state)[0][-1]))
-    dt_pub = drive.batch * model.dt_s
-    row.fault = drive.fault or ''
-    row.wall_s = time.perf_counter() - start
-    row.simulated_s = drive.sim.time_s
-    if speeds:
-        row.metrics = {
-            'peak_speed_m_s': max(abs(v) for v in speeds),
-            'mean_speed_m_s': sum(abs(v) for v in speeds) / len(speeds),
-            'distance_m': sum(speeds) * dt_pub,
-            'peak_thrust_n': max(thrusts),
-            'volume_min_m3': min(volumes),
-            'volume_max_m3': max(volumes),
-            'closure_relative': drive.sim.energy_ledger()['closure_relative'],
-            'edge_radius_min_m': min(edge),
-            'edge_radius_rest_m': float(model.profile(model.initial_state())[0][-1]),
-        }
+    def edge_radius(sim) -> None:
+        nonlocal model
+        model = sim.model
+        edge.append(float(model.profile(sim.state)[0][-1]))
+
+    row = run_one(spec, edge_radius)
+    if row.metrics:
+        row.metrics['edge_radius_min_m'] = min(edge)
+        row.metrics['edge_radius_rest_m'] = float(model.profile(model.initial_state())[0][-1])
     return row
 
 

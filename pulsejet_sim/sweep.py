@@ -42,7 +42,7 @@ import os
 from pathlib import Path
 import sys
 import time
-from typing import Any, Iterator, Mapping
+from typing import Any, Callable, Iterator, Mapping
 
 import yaml
 
@@ -93,8 +93,13 @@ def merge(base: Mapping, override: Mapping) -> dict:
     return scene_merge(dict(base), dict(override))
 
 
-def run_one(spec: RunSpec) -> RunRow:
-    """Run one variant without ROS and measure it (the executor's unit of work)."""
+def run_one(spec: RunSpec, on_batch: Callable[[Any], None] | None = None) -> RunRow:
+    """
+    Run one variant without ROS and measure it (the executor's unit of work).
+
+    `on_batch(sim)`, if given, is called with the Simulation after each published batch, for a
+    caller's own measurements beside the metrics.
+    """
     from pulsejet_sim.runner import Drive
     from pulsejet_sim.scene import load_scene
 
@@ -113,6 +118,8 @@ def run_one(spec: RunSpec) -> RunRow:
         thrusts.append(obs.thrust_n)
         radii.append(obs.mantle_radius_m)
         volumes.append(obs.volume_m3)
+        if on_batch is not None:
+            on_batch(drive.sim)
     dt_pub = drive.batch * drive.sim.model.dt_s
     row.fault = drive.fault or ''
     row.wall_s = time.perf_counter() - start

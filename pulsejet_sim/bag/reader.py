@@ -201,6 +201,35 @@ def format_version(library: str) -> int | None:
     return int(match.group(1)) if match else None
 
 
+def _check_header(header: Header, info: BagInfo, path: Path, *, repairing: bool = False) -> None:
+    """
+    Note the header's profile and library in `info`; refuse a file pulsejet must not read.
+
+    Raises BagReadError for a profile other than ros2 or a pulsejet format newer than
+    FORMAT_VERSION (worded for bag.repair when `repairing`).
+    """
+    info.profile = header.profile
+    info.library = header.library
+    if header.profile != 'ros2':
+        raise BagReadError(
+            f'{str(path)!r} is an MCAP file with profile {header.profile!r}; '
+            'expected a ROS 2 recording (profile "ros2")'
+        )
+    version = format_version(header.library)
+    if version is not None and version > FORMAT_VERSION:
+        if repairing:
+            what = f'repairs (format {FORMAT_VERSION}); update pulsejet'
+        else:
+            what = (
+                f'reads (format {FORMAT_VERSION}); allowed: recordings of format <= '
+                f'{FORMAT_VERSION}; update pulsejet to read it'
+            )
+        raise BagReadError(
+            f'{str(path)!r} was written in pulsejet recording format {version}, newer than this '
+            f'pulsejet {what}'
+        )
+
+
 #: the record kinds the reader needs, by opcode; indexes and statistics are rebuilt by whoever
 #: needs them
 _RECORDS = {
@@ -498,22 +527,7 @@ def iter_bag(
     try:
         for record in _records(fh, info):
             if isinstance(record, Header):
-                info.profile = record.profile
-                info.library = record.library
-                if record.profile != 'ros2':
-                    raise BagReadError(
-                        f'{str(p)!r} is an MCAP file with profile {record.profile!r}; '
-                        'expected a ROS 2 recording (profile "ros2")'
-                    )
-                version = format_version(record.library)
-                if version is not None and version > FORMAT_VERSION:
-                    raise BagReadError(
-                        f'{str(p)!r} was written in pulsejet recording format {version}, newer '
-                        'than this '
-                        f'pulsejet reads (format {FORMAT_VERSION}); allowed: recordings of format '
-                        '<= '
-                        f'{FORMAT_VERSION}; update pulsejet to read it'
-                    )
+                _check_header(record, info, p)
             elif isinstance(record, Schema):
                 # the first record of an id wins: a later copy (summary section) may be damaged
                 record = schemas.setdefault(record.id, record)

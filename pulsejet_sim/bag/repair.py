@@ -24,12 +24,11 @@ import sys
 from typing import Sequence
 
 from pulsejet_sim.bag.reader import (
+    _check_header,
     _open_checked,
     _records,
     BagInfo,
     BagReadError,
-    FORMAT_VERSION,
-    format_version,
 )
 
 
@@ -95,18 +94,7 @@ def repair_file(
     try:
         for record in _records(fh, info):
             if isinstance(record, Header):
-                info.profile, info.library = record.profile, record.library
-                if record.profile != 'ros2':
-                    raise BagReadError(
-                        f'{str(p)!r} is an MCAP file with profile {record.profile!r}; '
-                        'expected a ROS 2 recording (profile "ros2")'
-                    )
-                version = format_version(record.library)
-                if version is not None and version > FORMAT_VERSION:
-                    raise BagReadError(
-                        f'{str(p)!r} was written in pulsejet recording format {version}, newer '
-                        f'than this pulsejet repairs (format {FORMAT_VERSION}); update pulsejet'
-                    )
+                _check_header(record, info, p, repairing=True)
                 bag = BagWriter(tmp)
                 continue
             if bag is None:  # the header record was damaged (the reader skipped it): keep the data
