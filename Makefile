@@ -18,7 +18,7 @@ $(STAMP): requirements.txt setup.py setup.cfg
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m pulsejet_sim.demo $(DEMO_ARGS)
+	$(PY) -m pulsejet_sim.ros.demo $(DEMO_ARGS)
 
 test: $(STAMP)
 	$(PY) -m pytest -q $(PYTEST_ARGS)

@@ -203,10 +203,10 @@ setup(
     cmdclass=CMDCLASS,
     entry_points={
         'console_scripts': [
-            'sim_node = pulsejet_sim.sim_node:main',
+            'sim_node = pulsejet_sim.ros.sim_node:main',
             'controller_node = pulsejet_ctrl.controller_node:main',
-            'recorder = pulsejet_sim.recorder:main',
-            'replay = pulsejet_sim.replay:main',
+            'recorder = pulsejet_sim.ros.recorder:main',
+            'replay = pulsejet_sim.ros.replay:main',
             'pulsejet = pulsejet_sim.cli:main',
             'pulsejet_warmup = pulsejet_sim.warmup:main',
         ],

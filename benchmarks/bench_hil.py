@@ -45,8 +45,8 @@ def run_rate(
     rate_hz: float, seconds: float, rtf: float, scene: str, domain: int, log_dir: Path
 ) -> dict:
     from diagnostic_msgs.msg import DiagnosticArray
-    from pulsejet_sim.harness import NodeProcess
-    from pulsejet_sim.messages import command_from_applied
+    from pulsejet_sim.ros.harness import NodeProcess
+    from pulsejet_sim.ros.messages import command_from_applied
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -63,7 +63,7 @@ def run_rate(
     )
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     sim = NodeProcess(
-        'pulsejet_sim.sim_node',
+        'pulsejet_sim.ros.sim_node',
         {
             'scene': scene,
             'pacing': 'real_time',
@@ -239,7 +239,7 @@ def main(argv=None) -> int:
     ap.add_argument('--no-write', action='store_true', help=f'do not write {RESULTS}')
     ap.add_argument('--note', default='', help='a line added under the header of the results file')
     args = ap.parse_args(argv)
-    from pulsejet_sim.harness import default_domain_id
+    from pulsejet_sim.ros.harness import default_domain_id
 
     domain = default_domain_id() if args.domain_id is None else args.domain_id
     results = []

@@ -31,7 +31,7 @@ import time
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from live_common import cpu_seconds  # noqa: E402
 import numpy as np  # noqa: E402
-from pulsejet_sim.node_params import ros_value  # noqa: E402
+from pulsejet_sim.ros.node_params import ros_value  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'sim_node.md'
@@ -71,7 +71,7 @@ def run(
     sim_cmd = [
         sys.executable,
         '-m',
-        'pulsejet_sim.sim_node',
+        'pulsejet_sim.ros.sim_node',
         '--ros-args',
         '-p',
         f'scene:={scene}',

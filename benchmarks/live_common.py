@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from pulsejet_sim import interface  # noqa: E402
-from pulsejet_sim.harness import default_domain_id, NodeProcess  # noqa: E402
+from pulsejet_sim.ros.harness import default_domain_id, NodeProcess  # noqa: E402
 
 
 def node_env(domain: int) -> dict:

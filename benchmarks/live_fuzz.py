@@ -261,7 +261,7 @@ def fuzz_scene(
         'watchdog_timeout_s': 0.5,
         'diagnostics_period_s': 0.5,
     }
-    sim = NodeProcess('pulsejet_sim.sim_node', params, log_dir / f'sim_node.{scene}.log', env)
+    sim = NodeProcess('pulsejet_sim.ros.sim_node', params, log_dir / f'sim_node.{scene}.log', env)
     client = LiveClient(domain, f'live_fuzz_{scene}')
     flood = Flood(client, random.Random(seed))
     probe = ParamProbe(client.node)
@@ -303,7 +303,7 @@ def fuzz_scene(
                 restarts += 1
                 crash_tails.append(sim.output()[-1500:])
                 sim = NodeProcess(
-                    'pulsejet_sim.sim_node',
+                    'pulsejet_sim.ros.sim_node',
                     params,
                     log_dir / f'sim_node.{scene}.{restarts}.log',
                     env,

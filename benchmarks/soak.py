@@ -98,7 +98,7 @@ def soak(
             env,
         ),
         'sim_node': NodeProcess(
-            'pulsejet_sim.sim_node',
+            'pulsejet_sim.ros.sim_node',
             {
                 'scene': scene,
                 'pacing': 'real_time',
@@ -116,7 +116,7 @@ def soak(
     bag = tmp / 'soak.mcap'
     if record:
         procs['recorder'] = NodeProcess(
-            'pulsejet_sim.recorder',
+            'pulsejet_sim.ros.recorder',
             {'output': str(bag), 'topics': RECORDED_TOPICS},
             tmp / 'recorder.log',
             env,

@@ -50,8 +50,8 @@ import math
 import sys
 
 from pulsejet_ctrl import routines as _routines
-from pulsejet_sim import messages
-from pulsejet_sim.node_params import check_parameters, ParamSpec
+from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.node_params import check_parameters, ParamSpec
 from pulsejet_sim.scene import DEFAULT_SCENE
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockChange, JumpThreshold
@@ -333,7 +333,7 @@ class ControllerNode(Node):
 
 
 def main(args=None):
-    from pulsejet_sim.node_main import run_node
+    from pulsejet_sim.ros.node_main import run_node
 
     return run_node('controller_node', ControllerNode, args)
 

@@ -2,7 +2,7 @@
 The interface of the pulsejet nodes in one place.
 
 Topic, service and status names, types, field names and thresholds. No ROS import, so the ROS-free
-engine and offline tools use the same names; `pulsejet_sim.messages` builds the messages. Topic
+engine and offline tools use the same names; `pulsejet_sim.ros.messages` builds the messages. Topic
 names are relative (the node namespace applies), except `/clock` and `/diagnostics`.
 """
 

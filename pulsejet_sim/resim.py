@@ -287,8 +287,8 @@ def stored_scene(path: str | Path) -> Any | None:
     followed). ResimError names what was refused.
     """
     from pulsejet_sim.bag.reader import read_metadata
-    from pulsejet_sim.scene import is_project_scene_name, load_scene, scene_from_stored, SceneError
     from pulsejet_sim.models.schema import show
+    from pulsejet_sim.scene import is_project_scene_name, load_scene, scene_from_stored, SceneError
 
     found = read_metadata(path, METADATA_NAME)
     try:
@@ -432,8 +432,8 @@ def resimulate(
 
     writer = None
     if out is not None:
-        from pulsejet_sim import messages
         from pulsejet_sim.bag.writer import BagWriter
+        from pulsejet_sim.ros import messages
 
         writer = BagWriter(out)
         result.out_path = Path(out)

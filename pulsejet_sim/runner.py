@@ -95,8 +95,8 @@ def run_scene(
 
 
 def _record(drive: Drive, out: Path) -> RunResult:
-    from pulsejet_sim import messages
     from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
+    from pulsejet_sim.ros import messages
     import yaml
 
     sim, scene = drive.sim, drive.scene

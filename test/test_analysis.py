@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pulsejet_sim import analysis, messages
+from pulsejet_sim import analysis
 from pulsejet_sim.bag.writer import BagWriter
 from pulsejet_sim.models.base import Command, Observation
+from pulsejet_sim.ros import messages
 import pytest
 
 DT_S = 0.01

@@ -15,11 +15,11 @@ import textwrap
 import time
 
 from mcap.reader import make_reader
-from pulsejet_sim import messages
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.reader import bag_info, BagReadError, load_series, read_bag, repair
 from pulsejet_sim.bag.writer import BagError, BagWriter, install_signal_handlers
 from pulsejet_sim.models.base import Command, Observation
+from pulsejet_sim.ros import messages
 import pytest
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader

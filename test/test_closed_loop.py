@@ -10,7 +10,7 @@ import multiprocessing
 import signal
 
 from conftest import isolate_ros
-from pulsejet_sim.harness import SimHarness
+from pulsejet_sim.ros.harness import SimHarness
 import pytest
 from test_recorder import read_all, start_recorder
 

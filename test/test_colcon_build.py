@@ -111,7 +111,7 @@ def test_installed_layout(workspace):
     assert (prefix / 'share' / PACKAGE / 'package.xml').is_file()
     site = list((prefix / 'lib').glob('python3*/site-packages'))
     assert site, 'no site-packages in the install prefix'
-    assert (site[0] / 'pulsejet_sim' / 'sim_node.py').is_file()
+    assert (site[0] / 'pulsejet_sim' / 'ros' / 'sim_node.py').is_file()
     assert (site[0] / 'pulsejet_ctrl' / 'controller_node.py').is_file()
 
 
@@ -128,7 +128,7 @@ def test_installed_sim_node_runs(workspace):
     where = subprocess.run(
         sourced(
             workspace,
-            f'"{sys.executable}" -c "import pulsejet_sim.sim_node as m; print(m.__file__)"',
+            f'"{sys.executable}" -c "import pulsejet_sim.ros.sim_node as m; print(m.__file__)"',
         ),
         env=env,
         cwd=workspace,

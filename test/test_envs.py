@@ -273,3 +273,10 @@ def test_bad_env_arguments_refused():
         E.LumpedPumpValveEnv(control_period_s=0.00015)
     with pytest.raises(ValueError, match='integrator: rk4'):
         E.LumpedPumpValveVectorEnv(2, scene_overrides={'simulation': {'integrator': 'adaptive'}})
+    # the vector env checks an episode's length and the jitter as the single env does
+    for env_class in (E.LumpedPumpValveEnv, lambda **kw: E.LumpedPumpValveVectorEnv(2, **kw)):
+        for bad in (-1.0, 0.0, math.inf, math.nan):
+            with pytest.raises(ValueError, match=f'max_episode_s={bad!r}'):
+                env_class(max_episode_s=bad)
+        with pytest.raises(ValueError, match='initial_b_jitter=0.5'):
+            env_class(initial_b_jitter=0.5)

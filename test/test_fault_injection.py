@@ -9,7 +9,7 @@ import signal
 
 from conftest import isolate_ros
 from pulsejet_sim.engine.session import SAFE_COMMAND
-from pulsejet_sim.harness import SimHarness
+from pulsejet_sim.ros.harness import SimHarness
 import pytest
 
 WARN = 1
@@ -66,8 +66,8 @@ def test_a_restarted_sim_node_is_picked_up_by_the_controller_and_the_recorder(
     sim_node killed hard mid-run and started again: controller_node (time went back: its routine
     restarts) and an in-process recorder go on without a restart; the recording holds both runs.
     """
-    from pulsejet_sim.harness import NodeProcess
-    from pulsejet_sim.recorder import Recorder
+    from pulsejet_sim.ros.harness import NodeProcess
+    from pulsejet_sim.ros.recorder import Recorder
     from test_recorder import read_all
 
     domain = isolate_ros(monkeypatch, 73)
@@ -85,7 +85,7 @@ def test_a_restarted_sim_node_is_picked_up_by_the_controller_and_the_recorder(
             # without the hold it could pass the old run's time before anyone sees it go back)
             params = {'scene': 'pump_cycle', 'pacing': 'real_time', 'wait_for_subscribers': 3}
             h.processes['sim_node'] = NodeProcess(
-                'pulsejet_sim.sim_node', params, tmp_path / 'sim_node.2.log', h.environment()
+                'pulsejet_sim.ros.sim_node', params, tmp_path / 'sim_node.2.log', h.environment()
             )
             # the new run starts at t = 0 and the controller commands it again
             h.spin_until(

@@ -57,8 +57,8 @@ def values_of(entries) -> list[float]:
 @pytest.mark.timeout(150)
 def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
     from pulsejet_sim import interface as names
-    from pulsejet_sim.harness import SimHarness
-    from pulsejet_sim.recorder import Recorder
+    from pulsejet_sim.ros.harness import SimHarness
+    from pulsejet_sim.ros.recorder import Recorder
 
     mcap = tmp_path / 'run.mcap'
     t_start = time.monotonic()
@@ -169,7 +169,7 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
     # commands)
     applied = bag.get('/pulsejet/applied_command')
     assert applied, 'no /pulsejet/applied_command recorded'
-    from pulsejet_sim.messages import command_from_applied
+    from pulsejet_sim.ros.messages import command_from_applied
     from pulsejet_sim.scene import load_scene
     from pulsejet_sim.simulation import Simulation
 
@@ -205,7 +205,7 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
 
 @pytest.mark.timeout(150)
 def test_demo_end_to_end(ros_domain, tmp_path):
-    """`python -m pulsejet_sim.demo`: processes, recording, summary and plot, exit 0."""
+    """`python -m pulsejet_sim.ros.demo`: processes, recording, summary and plot, exit 0."""
     out = tmp_path / 'demo.mcap'
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(1 + (os.getpid() + DOMAIN_OFFSET + 1) % 100)
@@ -213,7 +213,7 @@ def test_demo_end_to_end(ros_domain, tmp_path):
         [
             sys.executable,
             '-m',
-            'pulsejet_sim.demo',
+            'pulsejet_sim.ros.demo',
             '--duration',
             '3',
             '--real-time-factor',
@@ -261,7 +261,7 @@ def test_demo_reports_a_failing_child(ros_domain, tmp_path):
         [
             sys.executable,
             '-m',
-            'pulsejet_sim.demo',
+            'pulsejet_sim.ros.demo',
             '--duration',
             '1',
             '--scene',

@@ -13,7 +13,7 @@ import sys
 
 from conftest import isolate_ros
 from pulsejet_ctrl import controller_node
-from pulsejet_sim import sim_node
+from pulsejet_sim.ros import sim_node
 import pytest
 import yaml
 
@@ -76,7 +76,7 @@ def test_sim_node_runs_from_the_params_file(monkeypatch):
         [
             sys.executable,
             '-m',
-            'pulsejet_sim.sim_node',
+            'pulsejet_sim.ros.sim_node',
             '--ros-args',
             '--params-file',
             str(PARAMS),

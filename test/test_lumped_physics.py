@@ -527,7 +527,7 @@ def test_ledger_message_warns_when_the_equations_create_energy():
 
     The status is the published one.
     """
-    from pulsejet_sim import messages
+    from pulsejet_sim.ros import messages
 
     paper, _ = run(overrides={'options': {'coupling': 'paper'}}, duration_s=1.0)
     cons, _ = run(duration_s=1.0)

@@ -20,9 +20,10 @@ import random
 
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-from pulsejet_sim import analysis, replay, resim
+from pulsejet_sim import analysis, resim
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, iter_bag
 from pulsejet_sim.bag.writer import BagWriter
+from pulsejet_sim.ros import replay
 import pytest
 
 EXAMPLES = int(os.environ.get('PULSEJET_FUZZ_EXAMPLES', '40'))

@@ -12,7 +12,7 @@ import time
 from conftest import isolate_ros
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
-from pulsejet_sim.node_params import node_command
+from pulsejet_sim.ros.node_params import node_command
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -25,7 +25,7 @@ def test_two_namespaced_robots_in_one_domain(monkeypatch, tmp_path):
     procs = []
     for ns, frame in (('robot1', 'robot1/base_link'), ('robot2', 'robot2/base_link')):
         cmd = node_command(
-            'pulsejet_sim.sim_node',
+            'pulsejet_sim.ros.sim_node',
             {'scene': 'pump_cycle', 'base_frame_id': frame, 'odom_frame_id': f'{ns}/odom'},
         ) + ['-r', f'__ns:=/{ns}']
         log = open(tmp_path / f'{ns}.log', 'wb')
@@ -93,13 +93,13 @@ def test_shell_mantle_marker_is_the_revolved_meridian(monkeypatch, tmp_path):
     import math
 
     from geometry_msgs.msg import PolygonStamped
-    from pulsejet_sim import messages
+    from pulsejet_sim.ros import messages
     from visualization_msgs.msg import Marker
 
     domain = isolate_ros(monkeypatch, 59)
     log = open(tmp_path / 'sim.log', 'wb')
     proc = subprocess.Popen(
-        node_command('pulsejet_sim.sim_node', {'scene': 'shell_robot'}),
+        node_command('pulsejet_sim.ros.sim_node', {'scene': 'shell_robot'}),
         stdout=log,
         stderr=subprocess.STDOUT,
     )

@@ -16,7 +16,7 @@ import sys
 import time
 
 from conftest import isolate_ros
-from pulsejet_sim.node_params import node_command, ParamSpec, scene_overrides
+from pulsejet_sim.ros.node_params import node_command, ParamSpec, scene_overrides
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
@@ -42,7 +42,7 @@ def domain(monkeypatch):
 def run_sim_node(*ros_args: str) -> subprocess.CompletedProcess:
     """sim_node to completion (a short duration_s, or a refused scene), output captured."""
     return subprocess.run(
-        [sys.executable, '-m', 'pulsejet_sim.sim_node', '--ros-args', *ros_args],
+        [sys.executable, '-m', 'pulsejet_sim.ros.sim_node', '--ros-args', *ros_args],
         capture_output=True,
         text=True,
         timeout=150,
@@ -222,7 +222,7 @@ def test_sim_node_refuses_a_bad_scene_override(domain, override, named):
 # ---- descriptors of replay and recorder ---------------------------------------------------------
 @pytest.mark.timeout(150)
 def test_replay_and_recorder_describe_their_parameters(domain, client, tmp_path):
-    from pulsejet_sim import recorder, replay
+    from pulsejet_sim.ros import recorder, replay
     from pulsejet_sim.runner import run_scene
     from pulsejet_sim.scene import load_scene
 
@@ -231,7 +231,7 @@ def test_replay_and_recorder_describe_their_parameters(domain, client, tmp_path)
     # the replay waits for a /clock subscriber that never comes: it stays up, serving its
     # parameters
     player = subprocess.Popen(
-        node_command('pulsejet_sim.replay', {'bag': str(bag), 'rate': 2})
+        node_command('pulsejet_sim.ros.replay', {'bag': str(bag), 'rate': 2})
         + ['-p', "wait_for_topics:=['/clock']"],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -239,7 +239,7 @@ def test_replay_and_recorder_describe_their_parameters(domain, client, tmp_path)
         cwd=ROOT,
     )
     rec = subprocess.Popen(
-        node_command('pulsejet_sim.recorder', {'output': str(tmp_path / 'rec.mcap')})
+        node_command('pulsejet_sim.ros.recorder', {'output': str(tmp_path / 'rec.mcap')})
         + ['-p', "topics:=['pulsejet/velocity']"],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,

@@ -15,7 +15,7 @@ import time
 
 from conftest import isolate_ros
 import numpy as np
-from pulsejet_sim.node_params import node_command
+from pulsejet_sim.ros.node_params import node_command
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
@@ -76,7 +76,7 @@ class NodeProcess:
 def start_node(ros_domain, tmp_path):
     started = []
 
-    def start(module='pulsejet_sim.sim_node', **params):
+    def start(module='pulsejet_sim.ros.sim_node', **params):
         # these tests exercise the pump/valve vehicle; the nodes' default scene is the shell robot
         params.setdefault('scene', 'pump_cycle')
         p = NodeProcess(module, params, tmp_path / f'{module}.{len(started)}.log')
@@ -229,8 +229,8 @@ def volume_series(probe, since_wall):
 
 @pytest.mark.timeout(120)
 def test_bad_commands_rejected_good_ones_applied(tmp_path):
-    from pulsejet_sim.harness import SimHarness
     from pulsejet_sim.models.base import Command
+    from pulsejet_sim.ros.harness import SimHarness
 
     with SimHarness(
         scene='pump_cycle',
@@ -323,7 +323,7 @@ def test_blow_up_stops_stepping_without_nan(tmp_path):
     node logs the cause, stops stepping and publishing, never publishes NaN and stays up. (A pump
     can no longer over-inflate the shell: its pressure-flow curve stalls it.)
     """
-    from pulsejet_sim.harness import SimHarness
+    from pulsejet_sim.ros.harness import SimHarness
 
     with SimHarness(
         scene='escape',
@@ -365,7 +365,7 @@ def test_blow_up_stops_stepping_without_nan(tmp_path):
 
 @pytest.mark.timeout(120)
 def test_blow_up_with_duration_exits_non_zero(tmp_path):
-    from pulsejet_sim.harness import SimHarness
+    from pulsejet_sim.ros.harness import SimHarness
 
     with SimHarness(
         scene='escape',
@@ -516,7 +516,7 @@ def test_lookahead_sends_every_state_once_in_order_through_a_reset(tmp_path):
     time: every period arrives once, in order, and a reset flushes the states computed ahead (they
     are sent, not lost) before the clock goes back to 0.
     """
-    from pulsejet_sim.harness import SimHarness
+    from pulsejet_sim.ros.harness import SimHarness
 
     period = 0.02
     with SimHarness(

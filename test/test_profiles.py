@@ -12,10 +12,11 @@ import shutil
 
 import numpy as np
 from PIL import Image
-from pulsejet_sim import analysis, cli, messages, profiles
+from pulsejet_sim import analysis, cli, profiles
 from pulsejet_sim.bag.reader import BagInfo, load_series
 from pulsejet_sim.bag.writer import BagWriter
 from pulsejet_sim.models.base import Command
+from pulsejet_sim.ros import messages
 from pulsejet_sim.runner import run_scene
 from pulsejet_sim.scene import load_scene
 import pytest

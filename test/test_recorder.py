@@ -13,9 +13,9 @@ import subprocess
 import sys
 import time
 
-from pulsejet_sim import messages
 from pulsejet_sim.models.base import Command, Observation
-from pulsejet_sim.recorder import parse_topics, Recorder
+from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.recorder import parse_topics, Recorder
 import pytest
 import rclpy
 from rclpy.duration import Duration
@@ -126,7 +126,8 @@ def start_recorder(
 ) -> tuple[subprocess.Popen, Path]:
     out = tmp_path / 'rec.mcap'
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    args = [sys.executable, '-m', 'pulsejet_sim.recorder', '--ros-args', '-p', f'output:={out}']
+    args = [sys.executable, '-m', 'pulsejet_sim.ros.recorder']
+    args += ['--ros-args', '-p', f'output:={out}']
     if topics is not None:
         args += ['-p', 'topics:=[' + ','.join(f"'{t}'" for t in topics) + ']']
     proc = subprocess.Popen(

@@ -37,7 +37,7 @@ WRITER = textwrap.dedent("""
     from std_msgs.msg import Float64
     from rosgraph_msgs.msg import Clock
     from pulsejet_sim.bag.writer import BagWriter, qos_profiles_yaml
-    from pulsejet_sim.recorder import CLOCK_QOS, STATE_QOS
+    from pulsejet_sim.ros.recorder import CLOCK_QOS, STATE_QOS
     path, mode, flush = sys.argv[1], sys.argv[2], float(sys.argv[3])
     # chunks close by age only
     bag = BagWriter(path, chunk_size_bytes=1 << 20, flush_period_s=flush)

@@ -17,7 +17,7 @@ import time
 from geometry_msgs.msg import TwistStamped
 import numpy as np
 from pulsejet_sim.bag import BagInfo, BagWriter, iter_bag
-from pulsejet_sim.replay import build_schedule, check_config, ConfigError, load_recording
+from pulsejet_sim.ros.replay import build_schedule, check_config, ConfigError, load_recording
 from pulsejet_sim.runner import run_scene
 from pulsejet_sim.scene import load_scene
 import pytest
@@ -115,7 +115,7 @@ class Listener:
 
 def start_replay(domain: int, *params: str) -> subprocess.Popen:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    args = [sys.executable, '-m', 'pulsejet_sim.replay', '--ros-args']
+    args = [sys.executable, '-m', 'pulsejet_sim.ros.replay', '--ros-args']
     for p in params:
         args += ['-p', p]
     return subprocess.Popen(

@@ -17,8 +17,8 @@ import time
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
-from pulsejet_sim.harness import HarnessError, SimHarness  # noqa: E402, I100
-from pulsejet_sim.models.base import Command  # noqa: E402
+from pulsejet_sim.models.base import Command  # noqa: E402, I100
+from pulsejet_sim.ros.harness import HarnessError, SimHarness  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
 OK, WARN, ERROR = 0, 1, 2
@@ -341,10 +341,10 @@ def test_harness_reports_a_failed_start(domain, tmp_path):
     ids=['pacing', 'watchdog', 'overrides'],
 )
 def test_bad_start_up_parameter_exits_2_with_the_reason(domain, tmp_path, param, value, expected):
-    from pulsejet_sim.harness import NodeProcess
+    from pulsejet_sim.ros.harness import NodeProcess
 
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    p = NodeProcess('pulsejet_sim.sim_node', {param: value}, tmp_path / 'sim.log', env)
+    p = NodeProcess('pulsejet_sim.ros.sim_node', {param: value}, tmp_path / 'sim.log', env)
     p.proc.wait(timeout=50)
     assert p.stop() == 2 and expected in p.output(), p.output()[-2000:]
 

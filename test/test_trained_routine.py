@@ -68,8 +68,8 @@ def read_bag(path: Path) -> dict[str, list]:
 
 @pytest.mark.timeout(150)
 def test_trained_routine_over_ros_matches_offline(stored, tmp_path, monkeypatch):
-    from pulsejet_sim.harness import SimHarness
-    from pulsejet_sim.recorder import Recorder
+    from pulsejet_sim.ros.harness import SimHarness
+    from pulsejet_sim.ros.recorder import Recorder
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from std_msgs.msg import Float64
     from std_srvs.srv import Trigger

@@ -12,12 +12,13 @@ import contextlib
 import io
 from pathlib import Path
 
-from pulsejet_sim import analysis, replay, resim
+from pulsejet_sim import analysis, resim
 from pulsejet_sim.bag import writer as bag_writer
 from pulsejet_sim.bag.reader import bag_info, BagInfo, BagReadError, iter_bag
 from pulsejet_sim.bag.repair import repair_file
 from pulsejet_sim.bag.writer import BagWriter
 from pulsejet_sim.models.schema import MAX_YAML_BYTES, safe_load_yaml, YAMLInputError
+from pulsejet_sim.ros import replay
 from pulsejet_sim.scene import load_scene, load_scene_data, SceneError
 import pytest
 import yaml

@@ -88,6 +88,22 @@ def steps_per_period(control_period_s: float, dt_s: float) -> int:
     return n
 
 
+def episode_periods(max_episode_s: float, control_period_s: float) -> int:
+    """Return the control periods of an episode (truncation); ValueError names a bad length."""
+    if not (max_episode_s > 0 and math.isfinite(max_episode_s)):
+        raise ValueError(
+            f'max_episode_s={max_episode_s!r} rejected; allowed: a positive number of seconds'
+        )
+    return int(math.ceil(max_episode_s / control_period_s - 1e-9))
+
+
+def check_b_jitter(initial_b_jitter: float) -> float:
+    """Return the initial jitter of the minor semi-axis (fraction); ValueError outside [0, 0.5)."""
+    if not 0.0 <= initial_b_jitter < 0.5:
+        raise ValueError(f'initial_b_jitter={initial_b_jitter!r} rejected; allowed: [0, 0.5)')
+    return float(initial_b_jitter)
+
+
 class LumpedPumpValveEnv(gym.Env):
     metadata = {'render_modes': []}
 
@@ -112,16 +128,10 @@ class LumpedPumpValveEnv(gym.Env):
         self.reward_name = R.check_reward(reward)
         self.n_steps = steps_per_period(control_period_s, self.model.dt_s)
         self.control_period_s = self.n_steps * self.model.dt_s
-        if not (max_episode_s > 0 and math.isfinite(max_episode_s)):
-            raise ValueError(
-                f'max_episode_s={max_episode_s!r} rejected; allowed: a positive number of seconds'
-            )
-        if not 0.0 <= initial_b_jitter < 0.5:
-            raise ValueError(f'initial_b_jitter={initial_b_jitter!r} rejected; allowed: [0, 0.5)')
-        self.max_periods = int(math.ceil(max_episode_s / self.control_period_s - 1e-9))
+        self.max_periods = episode_periods(max_episode_s, self.control_period_s)
         self.target_speed_m_s = float(target_speed_m_s)
         self.fault_penalty = float(fault_penalty)
-        self.initial_b_jitter = float(initial_b_jitter)
+        self.initial_b_jitter = check_b_jitter(initial_b_jitter)
         self.cot_min_distance_m = float(cot_min_distance_m)
         self.mass_kg = lumped_mass_kg(self.model.params)
         self.observation_space, self.action_space = lumped_spaces(self.model.params)

@@ -29,7 +29,7 @@ import gymnasium as gym
 from gymnasium import spaces
 import numpy as np
 from pulsejet_sim.envs import rewards as R
-from pulsejet_sim.envs.lumped_env import steps_per_period
+from pulsejet_sim.envs.lumped_env import episode_periods, steps_per_period
 from pulsejet_sim.models import shell_kernels as sk
 from pulsejet_sim.models.base import Command, SimulationBlowUp
 from pulsejet_sim.scene import load_scene
@@ -69,11 +69,7 @@ class ShellCableEnv(gym.Env):
         self.reward_name = R.check_reward(reward)
         self.n_steps = steps_per_period(control_period_s, self.model.dt_s)
         self.control_period_s = self.n_steps * self.model.dt_s
-        if not (max_episode_s > 0 and math.isfinite(max_episode_s)):
-            raise ValueError(
-                f'max_episode_s={max_episode_s!r} rejected; allowed: a positive number of seconds'
-            )
-        self.max_periods = int(math.ceil(max_episode_s / self.control_period_s - 1e-9))
+        self.max_periods = episode_periods(max_episode_s, self.control_period_s)
         self.target_speed_m_s = float(target_speed_m_s)
         self.fault_penalty = float(fault_penalty)
         self.initial_perturbation_m = abs(float(initial_perturbation_m))

@@ -28,6 +28,8 @@ from gymnasium.vector.utils import batch_space
 import numpy as np
 from pulsejet_sim.envs import rewards as R
 from pulsejet_sim.envs.lumped_env import (
+    check_b_jitter,
+    episode_periods,
     lumped_mass_kg,
     lumped_observation,
     lumped_spaces,
@@ -69,10 +71,10 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         self.reward_name = R.check_reward(reward)
         self.n_steps = steps_per_period(control_period_s, self.model.dt_s)
         self.control_period_s = self.n_steps * self.model.dt_s
-        self.max_periods = int(math.ceil(max_episode_s / self.control_period_s - 1e-9))
+        self.max_periods = episode_periods(max_episode_s, self.control_period_s)
         self.target_speed_m_s = float(target_speed_m_s)
         self.fault_penalty = float(fault_penalty)
-        self.initial_b_jitter = float(initial_b_jitter)
+        self.initial_b_jitter = check_b_jitter(initial_b_jitter)
         self.cot_min_distance_m = float(cot_min_distance_m)
         self.exact = bool(exact)
         n = self.num_envs

@@ -3,7 +3,7 @@ Test harness: the real sim_node (and optionally controller_node) as processes.
 
 The processes run in an isolated DDS domain.
 
-    from pulsejet_sim.harness import SimHarness
+    from pulsejet_sim.ros.harness import SimHarness
 
     with SimHarness(scene='pump_cycle', pacing='lockstep', parameters={'step_count': 1000}) as h:
         h.send(valve_opening=0.0, pump_flow_m3_s=2.5e-3)  # held from the next physics step on
@@ -14,7 +14,7 @@ The processes run in an isolated DDS domain.
         h.wait_for(lambda s: s.volume_m3 > 2e-3, timeout_s=10)
         h.reset()  # simulated time back to 0
 
-`SimHarness` starts `python -m pulsejet_sim.sim_node` (and `pulsejet_ctrl.controller_node` with
+`SimHarness` starts `python -m pulsejet_sim.ros.sim_node` (and `pulsejet_ctrl.controller_node` with
 `controller=True`) as subprocesses in their own ROS domain (`domain_id`, default 215 + pid % 18,
 unless given) with localhost-only discovery, and talks to them from its own rclpy context and node
 (never the global one): state subscriptions (`latest`, `states`, `wait_for`), command publishers
@@ -44,7 +44,7 @@ import time
 from typing import Any, Callable
 
 from pulsejet_sim import interface as names
-from pulsejet_sim.node_params import node_command
+from pulsejet_sim.ros.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 
 DOMAIN_BASE = 215  # 215-232: a range ROS documents as safe on Linux
@@ -237,7 +237,7 @@ class SimHarness:
                 'pulsejet_ctrl.controller_node', params, self.log_dir / 'controller_node.log', env
             )
         self.processes['sim_node'] = NodeProcess(
-            'pulsejet_sim.sim_node', sim_params, self.log_dir / 'sim_node.log', env
+            'pulsejet_sim.ros.sim_node', sim_params, self.log_dir / 'sim_node.log', env
         )
 
         self.context = rclpy.Context()
@@ -366,7 +366,7 @@ class SimHarness:
         )
 
     def _on_applied(self, msg):
-        from pulsejet_sim.messages import command_from_applied
+        from pulsejet_sim.ros.messages import command_from_applied
 
         t, cmd = command_from_applied(msg)
         self.applied.append((t, cmd, time.monotonic()))

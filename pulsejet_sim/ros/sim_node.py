@@ -40,15 +40,15 @@ Parameters (see PARAMETERS for the ranges; `ros2 param describe /sim_node <name>
                                              odom
   base_frame_id         (string, read-only)  child frame of `odom`; default base_link
 
-Topics, services and types: `pulsejet_sim.messages` (one place for every name). Commands arrive per
-actuator (std_msgs/Float64) or atomically on pulsejet/cmd/command (sensor_msgs/JointState, every
-named actuator at the same step); subscriptions are best effort, so reliable and best-effort
-publishers both connect. A non-finite or out-of-range value is rejected with a warning naming it
-(throttled; /diagnostics counts every one); the held command is kept. Commands reach the pacing
-thread through an inbox, so the executor never waits for a physics batch; the kernels release the
-GIL while they step. Reset returns to the scene's initial state and command at time 0
-(/clock jumps back, like a Gazebo world reset). The diagnostic status is named after the node's
-fully qualified name, so two robots in one domain stay apart.
+Topic, service and status names: `pulsejet_sim.interface` (one place for every name). Commands
+arrive per actuator (std_msgs/Float64) or atomically on pulsejet/cmd/command
+(sensor_msgs/JointState, every named actuator at the same step); subscriptions are best effort, so
+reliable and best-effort publishers both connect. A non-finite or out-of-range value is rejected
+with a warning naming it (throttled; /diagnostics counts every one); the held command is kept.
+Commands reach the pacing thread through an inbox, so the executor never waits for a physics batch;
+the kernels release the GIL while they step. Reset returns to the scene's initial state and command
+at time 0 (/clock jumps back, like a Gazebo world reset). The diagnostic status is named after the
+node's fully qualified name, so two robots in one domain stay apart.
 Exit code: 0 on duration reached or SIGINT/SIGTERM, 1 when stopped after a blow-up, 2 on a bad
 scene or parameter.
 """
@@ -64,11 +64,11 @@ import threading
 import time
 
 import numpy as np
-from pulsejet_sim import messages
 from pulsejet_sim.engine import session as eng
 from pulsejet_sim.engine.outbox import TimedOutbox
 from pulsejet_sim.models.base import CommandError, SimulationBlowUp
-from pulsejet_sim.node_params import (
+from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.node_params import (
     check_parameters,
     ParamSpec,
     scene_override_descriptor,
@@ -242,8 +242,8 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('sim_node', **kwargs)
-        from pulsejet_sim.scene import load_scene
         from pulsejet_sim.models.schema import safe_load_yaml, YAMLInputError
+        from pulsejet_sim.scene import load_scene
         from pulsejet_sim.simulation import Simulation
         import yaml
 
@@ -709,7 +709,7 @@ class SimNode(Node):
 
 
 def main(args=None):
-    from pulsejet_sim.node_main import run_node
+    from pulsejet_sim.ros.node_main import run_node
 
     # the pacing thread must get the GIL within a fraction of a publication period when the
     # executor thread is busy (CPython's default switch interval is 5 ms); the kernels release it

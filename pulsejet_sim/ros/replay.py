@@ -11,7 +11,7 @@ without sleeping). Log times are simulation time for `pulsejet run` files and wa
 times for recorder files, so either plays back at its recorded pace.
 
     ros2 run pulsejet_sim replay --ros-args -p bag:=runs/x.mcap -p rate:=2.0
-    python -m pulsejet_sim.replay --ros-args -p bag:=runs/x.mcap -p loop:=true
+    python -m pulsejet_sim.ros.replay --ros-args -p bag:=runs/x.mcap -p loop:=true
 
 Parameters (read-only, declared with descriptors: `ros2 param describe /replay rate`; see
 parameter_specs)
@@ -89,12 +89,12 @@ TOPIC_LIST = 'a list of topic names, e.g. "[\'pulsejet/velocity\', \'/clock\']"'
 
 def parameter_specs() -> dict:
     """
-    Return name -> pulsejet_sim.node_params.ParamSpec, as `ros2 param describe /replay` shows them.
+    Return name -> node_params.ParamSpec, as `ros2 param describe /replay` shows them.
 
     All read-only (the file is played as configured at start-up) and dynamically typed (rate:=2 and
     rate:=2.0 both work): check_config checks the values, before they are declared.
     """
-    from pulsejet_sim.node_params import ParamSpec
+    from pulsejet_sim.ros.node_params import ParamSpec
 
     inf = math.inf
     specs = (

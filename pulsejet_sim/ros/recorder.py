@@ -23,10 +23,10 @@ import sys
 import time
 from typing import Iterable, Sequence
 
-from pulsejet_sim import messages
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.writer import BagError, BagWriter, qos_profiles_yaml
-from pulsejet_sim.node_params import ParamSpec
+from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.node_params import ParamSpec
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 

@@ -1,7 +1,7 @@
 r"""
 `make demo`: sim_node + controller_node as processes, every topic recorded to MCAP, then a summary.
 
-    python -m pulsejet_sim.demo [--scene shell_robot] [--duration 10] [--real-time-factor 1] \
+    python -m pulsejet_sim.ros.demo [--scene shell_robot] [--duration 10] [--real-time-factor 1] \
         [--out FILE]
 
 The nodes run in their own ROS domain (ROS_DOMAIN_ID from the environment if set, otherwise one
@@ -20,7 +20,7 @@ import subprocess
 import sys
 import time
 
-from pulsejet_sim.node_params import node_command
+from pulsejet_sim.ros.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 
 STARTUP_TIMEOUT_S = 60.0  # scene loading + JIT compilation of a cold cache
@@ -70,8 +70,8 @@ def make_recorder(node, path: Path):
     The pulsejet topics include the commands, the ledger and /clock; /diagnostics carries the
     node's health: achieved real-time factor, dropped time, watchdog, faults.
     """
-    from pulsejet_sim import messages
-    from pulsejet_sim.recorder import Recorder
+    from pulsejet_sim.ros import messages
+    from pulsejet_sim.ros.recorder import Recorder
 
     return Recorder(
         node,
@@ -125,7 +125,7 @@ def run_demo(
         sim_params['publish_rate_hz'] = float(publish_rate_hz)
     commands = {
         'controller_node': node_command('pulsejet_ctrl.controller_node', {'scene': scene}),
-        'sim_node': node_command('pulsejet_sim.sim_node', sim_params),
+        'sim_node': node_command('pulsejet_sim.ros.sim_node', sim_params),
     }
 
     # Ctrl-C reaches the whole process group: note it here (the handler runs before the next
@@ -258,7 +258,7 @@ def default_out() -> Path:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(
-        prog='python -m pulsejet_sim.demo', description=__doc__.strip().split('\n')[0]
+        prog='python -m pulsejet_sim.ros.demo', description=__doc__.strip().split('\n')[0]
     )
     parser.add_argument(
         '--scene', default=DEFAULT_SCENE, help='scene name under config/ or a YAML path'
