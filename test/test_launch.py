@@ -13,7 +13,7 @@ import sys
 
 from conftest import isolate_ros
 from pulsejet_ctrl import controller_node
-from pulsejet_sim.ros import sim_node
+from pulsejet_sim.ros import sim_node_params
 import pytest
 import yaml
 
@@ -49,7 +49,7 @@ def test_launch_starts_installed_executables_with_declared_parameters():
     assert {n['executable'] for n in nodes} == {'sim_node', 'controller_node', 'recorder'}
     scripts = dict(console_scripts())
     declared = {
-        'sim_node': set(sim_node.PARAMETER_SPECS),
+        'sim_node': set(sim_node_params.PARAMETER_SPECS),
         'controller_node': (
             {'scene', 'rate_hz', 'closed_loop'} | set(controller_node.ROUTINE_FIELDS)
         ),
@@ -63,7 +63,7 @@ def test_launch_starts_installed_executables_with_declared_parameters():
         block = params[node['name']]['ros__parameters']
         assert set(block) <= declared[node['name']], set(block) - declared[node['name']]
     for name, value in params['sim_node']['ros__parameters'].items():
-        sim_node.PARAMETER_SPECS[name].check(value)  # in range, the right type
+        sim_node_params.PARAMETER_SPECS[name].check(value)  # in range, the right type
     setup = (ROOT / 'setup.py').read_text()
     assert "glob('launch/*.launch.py')" in setup and "glob('config/params/*.yaml')" in setup
     assert "'config', 'params', 'pulsejet.yaml'" in LAUNCH.read_text()

@@ -210,3 +210,15 @@ def test_outbox_sends_each_batch_at_its_time_in_order_and_flush_sends_the_rest_n
     box.flush()
     assert [k for k, _ in sent][-1] == 'late' and box.pending() == 0
     box.close()
+
+
+def test_log_throttle_burst_then_rate_and_counts_the_rest():
+    throttle = eng.LogThrottle(burst=3, rate_hz=2.0, now=0.0)
+    passed = [throttle.admit(f'bad {i}', now=0.0) for i in range(10)]
+    assert passed[:3] == ['bad 0', 'bad 1', 'bad 2'] and passed[3:] == [None] * 7
+    assert throttle.admit('bad 10', now=0.2) is None  # 0.4 of a token refilled
+    # half a second later one token is back: the line says how many were held back
+    assert throttle.admit('bad 11', now=0.5) == 'bad 11 (8 more not logged)'
+    assert throttle.admit('bad 12', now=0.5) is None
+    assert throttle.admit('bad 13', now=100.0) == 'bad 13 (1 more not logged)'
+    assert throttle.admit('bad 14', now=100.0) == 'bad 14'  # refilled up to the burst only

@@ -163,6 +163,52 @@ class SessionConfig:
     lookahead_s: float = 0.0
     paused: bool = False
 
+    def describe(self) -> str:
+        """Return the pacing, duration and watchdog in words (a start-up log line)."""
+        return (
+            f'pacing {self.pacing}'
+            + (f' x{self.real_time_factor:g}' if self.pacing == 'real_time' else '')
+            + (', paused' if self.paused else '')
+            + ', '
+            + (
+                f'duration {self.duration_s:g} s'
+                if self.duration_s > 0
+                else 'running until stopped'
+            )
+            + (
+                f', watchdog {self.watchdog_timeout_s:g} s of {self.watchdog_clock} time '
+                f'({self.watchdog_action})'
+                if self.watchdog_timeout_s > 0
+                else ''
+            )
+        )
+
+
+class LogThrottle:
+    """
+    A token bucket for log lines: a burst, then a rate; the rest are counted, not logged.
+
+    A publisher flooding bad values must not spend the node's time on logging; the next line that
+    passes says how many were held back.
+    """
+
+    def __init__(self, burst: int, rate_hz: float, now: float = 0.0):
+        self.burst, self.rate_hz = float(burst), float(rate_hz)
+        self._tokens, self._refilled, self._held = float(burst), now, 0
+
+    def admit(self, text: str, now: float) -> str | None:
+        """Return the line to log now (with the count held back since the last), or None."""
+        self._tokens = min(self.burst, self._tokens + (now - self._refilled) * self.rate_hz)
+        self._refilled = now
+        if self._tokens < 1.0:
+            self._held += 1
+            return None
+        self._tokens -= 1.0
+        if self._held:
+            text += f' ({self._held} more not logged)'
+            self._held = 0
+        return text
+
 
 @dataclass
 class Session:

@@ -185,6 +185,46 @@ def ledger_message(
     return array
 
 
+def health_message(
+    level: str,
+    name: str,
+    hardware_id: str,
+    message: str,
+    values: Mapping[str, Any],
+    time_s: float,
+    frame_id: str = FRAME_ID,
+) -> DiagnosticArray:
+    """
+    Return a node's health as a DiagnosticArray of one status (level 'OK', 'WARN' or 'ERROR').
+
+    Floats as repr (they parse back exactly), 'n/a' where not finite; other values as str.
+    """
+    status = DiagnosticStatus(
+        level={
+            'OK': DiagnosticStatus.OK,
+            'WARN': DiagnosticStatus.WARN,
+            'ERROR': DiagnosticStatus.ERROR,
+        }[level],
+        name=name,
+        message=message,
+        hardware_id=hardware_id,
+    )
+    status.values = [
+        KeyValue(
+            key=k,
+            value=(
+                (repr(float(v)) if math.isfinite(v) else 'n/a') if isinstance(v, float) else str(v)
+            ),
+        )
+        for k, v in values.items()
+    ]
+    array = DiagnosticArray()
+    array.header.stamp = stamp(time_s)
+    array.header.frame_id = frame_id
+    array.status = [status]
+    return array
+
+
 def ledger_from_message(msg: Any) -> dict[str, float]:
     """Inverse of ledger_message (works on rclpy or decoded-from-bag messages): key -> J."""
     out: dict[str, float] = {}

@@ -1,0 +1,266 @@
+"""
+The parameters of sim_node: declarations with ranges, and what they build (scene, session).
+
+sim_node parameters (PARAMETERS holds their ranges; `ros2 param describe /sim_node <name>`
+shows them):
+  scene                 (string, read-only)  scene name under config/ or a YAML path; default
+                                             shell_robot
+  scene_overrides       (string, read-only)  YAML mapping merged into the scene (kept for
+                                             compatibility)
+  scene.<section>.<key> (any, read-only)     one scene key each, merged over scene_overrides, e.g.
+                                             `-p scene.geometry.nozzle_radius_m:=0.01`, or a nested
+                                             `scene:` mapping in a params file (rcl flattens it)
+  pacing                (string, live)       real_time | as_fast_as_possible | lockstep |
+                                             closed_loop
+  real_time_factor      (double, live)       simulated s per wall s under real_time pacing
+  publish_rate_hz       (double, read-only)  publication rate; 0 = scene value or 100. Every state
+                                             lies on the physics step's grid, one publication
+                                             period apart
+  control_period_s      (double, read-only)  closed_loop: simulated s per control period (0 = one
+                                             publication period)
+  lookahead_s           (double, read-only)  real_time: simulated s the physics runs ahead; each
+                                             state is sent at its own wall time, so slow steps do
+                                             not jitter publication (default 0)
+  duration_s            (double, read-only)  simulated time after which the node exits (0 =
+                                             forever)
+  wait_for_subscribers  (int, read-only)     hold the clock at 0 until `/clock` has this many
+                                             subscribers
+  wait_timeout_s        (double, read-only)  see wait_for_subscribers; default 10
+  start_paused          (bool, read-only)    start paused (resume with pulsejet/pause false)
+  step_count            (int, live)          physics steps per pulsejet/step call; default 100
+  watchdog_timeout_s    (double, live)       command age before the watchdog trips; 0 = off
+                                             (default)
+  watchdog_clock        (string, live)       sim (simulated seconds, reproducible) | wall (wall
+                                             seconds)
+  watchdog_action       (string, live)       safe (pump off, valve open, cable released) | hold
+  diagnostics_period_s  (double, read-only)  /diagnostics period in wall seconds; default 1
+  odom_frame_id         (string, read-only)  header frame of `odom` (nav_msgs/Odometry); default
+                                             odom
+  base_frame_id         (string, read-only)  child frame of `odom`; default base_link
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pulsejet_sim.engine import session as eng
+from pulsejet_sim.interface import BASE_FRAME_ID, ODOM_FRAME_ID
+from pulsejet_sim.ros.node_params import (
+    ParamSpec,
+    scene_override_descriptor,
+    scene_override_names,
+    scene_overrides,
+)
+from pulsejet_sim.scene import DEFAULT_SCENE
+
+DEFAULT_PUBLISH_RATE_HZ = 100.0
+PARAMETERS = (
+    ParamSpec(
+        'scene',
+        DEFAULT_SCENE,
+        'scene name under config/ or path to a scene YAML',
+        read_only=True,
+        allowed='a scene name under config/ or a YAML file path',
+    ),
+    ParamSpec(
+        'scene_overrides',
+        '',
+        'YAML mapping merged into the scene section by section '
+        '(e.g. "{material: {stiffness_n_m: 200}}"); empty = none',
+        read_only=True,
+        allowed='empty or a YAML mapping',
+    ),
+    ParamSpec(
+        'pacing',
+        'real_time',
+        'how simulated time advances: real_time (scaled by real_time_factor), '
+        'as_fast_as_possible, lockstep (only through the pulsejet/step service) or closed_loop '
+        '(one control '
+        'period per command that answers the last state)',
+        choices=eng.PACING_MODES,
+    ),
+    ParamSpec(
+        'real_time_factor',
+        1.0,
+        'simulated seconds per wall-clock second under real_time pacing',
+        1e-3,
+        1000.0,
+    ),
+    ParamSpec(
+        'publish_rate_hz',
+        0.0,
+        'state publication rate in Hz; 0 = the scene value or 100',
+        0.0,
+        10000.0,
+        read_only=True,
+        allowed='0 (scene value) or a rate in [0, 10000] Hz',
+    ),
+    ParamSpec(
+        'control_period_s',
+        0.0,
+        'closed_loop pacing: simulated seconds per control period ' '(0 = one publication period)',
+        0.0,
+        60.0,
+        read_only=True,
+    ),
+    ParamSpec(
+        'lookahead_s',
+        0.0,
+        'real_time pacing: simulated seconds the physics runs ahead of publication, so '
+        'slow steps do not delay states (each is published at its wall time); commands act that '
+        'much '
+        'later (0 = publish each state as soon as it is computed)',
+        0.0,
+        1.0,
+        read_only=True,
+    ),
+    ParamSpec(
+        'duration_s',
+        0.0,
+        'simulated seconds after which the node exits (0 = run forever)',
+        0.0,
+        1e9,
+        read_only=True,
+    ),
+    ParamSpec(
+        'wait_for_subscribers',
+        0,
+        'hold the simulation at t=0 until /clock has this many subscribers',
+        0,
+        100,
+        read_only=True,
+    ),
+    ParamSpec(
+        'wait_timeout_s',
+        10.0,
+        'wall seconds to wait for subscribers before starting anyway',
+        0.0,
+        3600.0,
+        read_only=True,
+    ),
+    ParamSpec(
+        'start_paused',
+        False,
+        'start paused (resume with the pulsejet/pause service, data false)',
+        read_only=True,
+    ),
+    ParamSpec(
+        'step_count', 100, 'physics steps advanced by one pulsejet/step call', 1, 10_000_000
+    ),
+    ParamSpec(
+        'watchdog_timeout_s',
+        0.0,
+        'command age before the command watchdog trips (0 = off)',
+        0.0,
+        3600.0,
+    ),
+    ParamSpec(
+        'watchdog_clock',
+        'sim',
+        'what the watchdog measures the command age in: sim (simulated '
+        'seconds) or wall (wall-clock seconds)',
+        choices=eng.WATCHDOG_CLOCKS,
+    ),
+    ParamSpec(
+        'watchdog_action',
+        'safe',
+        'what the tripped watchdog does: safe = pump off, valve open, cable '
+        'released; hold = keep the last command',
+        choices=eng.WATCHDOG_ACTIONS,
+    ),
+    ParamSpec(
+        'diagnostics_period_s',
+        1.0,
+        'period of /diagnostics in wall seconds',
+        0.05,
+        60.0,
+        read_only=True,
+    ),
+    ParamSpec(
+        'odom_frame_id',
+        ODOM_FRAME_ID,
+        'frame of the odometry pose (REP 105)',
+        read_only=True,
+        allowed='a frame name',
+    ),
+    ParamSpec(
+        'base_frame_id',
+        BASE_FRAME_ID,
+        'body frame of the odometry twist (REP 105)',
+        read_only=True,
+        allowed='a frame name',
+    ),
+)
+PARAMETER_SPECS = {p.name: p for p in PARAMETERS}
+LIVE_CONFIG = (
+    'pacing',
+    'real_time_factor',
+    'step_count',
+    'watchdog_timeout_s',
+    'watchdog_clock',
+    'watchdog_action',
+)
+
+
+def declare(node) -> dict[str, Any]:
+    """Declare every parameter on `node` and return the checked values (ValueError: a bad one)."""
+    for spec in PARAMETERS:
+        node.declare_parameter(spec.name, spec.default, spec.descriptor())
+    return {spec.name: spec.check(node.get_parameter(spec.name).value) for spec in PARAMETERS}
+
+
+def load_scene_from_parameters(node, values: dict[str, Any]):
+    """
+    Load the scene named by the parameters, with its overrides.
+
+    `scene_overrides` (a YAML mapping) first, then every `scene.<key>` parameter given at start-up
+    (declared here, so that `ros2 param list/describe` shows it). The scene's validation refuses
+    unknown keys and bad values; ValueError names them.
+    """
+    from pulsejet_sim.models.schema import safe_load_yaml, YAMLInputError
+    from pulsejet_sim.scene import load_scene, merge
+    import yaml
+
+    text = values['scene_overrides']
+    overrides = None
+    if text.strip():
+        try:
+            overrides = safe_load_yaml(text, 'parameter scene_overrides')
+        except (yaml.YAMLError, YAMLInputError) as exc:
+            raise ValueError(
+                f'parameter scene_overrides={text!r} rejected: not YAML ({exc})'
+            ) from None
+        if not isinstance(overrides, dict):
+            raise ValueError(
+                f'parameter scene_overrides={text!r} rejected; allowed: empty or a YAML mapping'
+            )
+    names = scene_override_names(node._parameter_overrides)
+    for name in names:
+        node.declare_parameter(
+            name, node._parameter_overrides[name].value, scene_override_descriptor(name)
+        )
+    if names:
+        given = {n: node.get_parameter(n).value for n in names}
+        overrides = merge(overrides or {}, scene_overrides(given))
+        node.get_logger().info(
+            'scene overrides: ' + ', '.join(f'{n}={v!r}' for n, v in given.items())
+        )
+    # command_driven: a shell scene's built-in cable routine comes from pulsejet/cmd/* instead
+    return load_scene(values['scene'], overrides=overrides, command_driven=True)
+
+
+def session_config(values: dict[str, Any], publish_rate_hz: float) -> eng.SessionConfig:
+    """Return the engine's configuration from the parameter values."""
+    return eng.SessionConfig(
+        pacing=values['pacing'],
+        real_time_factor=values['real_time_factor'],
+        publish_rate_hz=publish_rate_hz,
+        duration_s=values['duration_s'],
+        step_count=values['step_count'],
+        watchdog_timeout_s=values['watchdog_timeout_s'],
+        watchdog_action=values['watchdog_action'],
+        watchdog_clock=values['watchdog_clock'],
+        control_period_s=values['control_period_s'],
+        paused=values['start_paused'],
+        lookahead_s=values['lookahead_s'],
+    )

@@ -1,0 +1,110 @@
+"""
+sim_node's publishers, and the publish calls of each engine event (messages built at once).
+
+A state's messages are built when the state is computed, so that they hold that state even when
+they are sent later (`lookahead_s`: the outbox sends them at their wall time); each method returns
+the calls, the caller decides when to run them.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Callable
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from pulsejet_sim.engine.session import observation_is_finite
+from pulsejet_sim.ros import messages
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from visualization_msgs.msg import Marker
+
+#: the meridian (tens of points) at most this often: at 1 kHz it would cost more than the rest of
+#: the state; every ledger publication carries one too
+PROFILE_RATE_MAX_HZ = 100.0
+RELIABLE = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE
+)
+
+Call = Callable[[], object]
+
+
+class StatePublisher:
+    """
+    The publishers of one simulated robot on `node`.
+
+    sim: the Simulation (its profile and energy ledger are read when a state is built);
+    frames: (odom frame, body frame) of the odometry and the Marker.
+    """
+
+    def __init__(self, node, sim, publish_rate_hz: float, frames: tuple[str, str]):
+        self.sim = sim
+        self.frames = frames
+        classes = {
+            topic: messages.message_class(topic)
+            for topic in messages.STATE_TOPICS
+            + (messages.TOPIC_ENERGY_LEDGER, messages.TOPIC_APPLIED_COMMAND)
+        }
+        classes[messages.TOPIC_DIAGNOSTICS] = DiagnosticArray
+        self.has_profile = sim.profile() is not None
+        if self.has_profile:
+            classes[messages.TOPIC_MANTLE_PROFILE] = messages.message_class(
+                messages.TOPIC_MANTLE_PROFILE
+            )
+            classes[messages.TOPIC_MANTLE_MARKER] = Marker
+        self._pubs = {
+            topic: node.create_publisher(cls, topic, RELIABLE) for topic, cls in classes.items()
+        }
+        self._profile_every = max(1, int(math.ceil(publish_rate_hz / PROFILE_RATE_MAX_HZ - 1e-9)))
+        self._states_built = 0
+
+    def _call(self, topic: str, msg) -> Call:
+        return functools.partial(self._pubs[topic].publish, msg)
+
+    def state(self, obs, ledger: bool = False) -> list[Call]:
+        """Return the publish calls of one state; none for a non-finite one (never NaN)."""
+        if not observation_is_finite(obs):
+            return []
+        calls = []
+        self._states_built += 1
+        profile = None
+        if self.has_profile and (ledger or self._states_built % self._profile_every == 0):
+            profile = self.sim.profile()
+            if not all(np.isfinite(arr).all() for arr in profile):
+                profile = None
+        if profile is not None:  # before /clock, which the state's consumers take as its end
+            profile_msg = messages.profile_message(*profile, obs.time_s)
+            calls.append(self._call(messages.TOPIC_MANTLE_PROFILE, profile_msg))
+        for topic, msg in messages.observation_messages(obs, messages.FRAME_ID, *self.frames):
+            calls.append(self._call(topic, msg))
+        if ledger:
+            calls += self.ledger(obs.time_s)
+            marker = self._pubs.get(messages.TOPIC_MANTLE_MARKER)
+            # the 3-D view at the ledger's rate, in the odometry's body frame, and only while
+            # someone looks: its ~14000 points take ~15 ms of the GIL to build and send
+            if profile is not None and marker.get_subscription_count():
+                calls.append(
+                    functools.partial(
+                        marker.publish,
+                        messages.mantle_marker(*profile, obs.time_s, self.frames[1]),
+                    )
+                )
+        return calls
+
+    def ledger(self, time_s: float) -> list[Call]:
+        """Return the energy ledger's publish call (none while a value is not finite)."""
+        values = self.sim.energy_ledger()
+        if not all(math.isfinite(v) for v in values.values()):
+            return []
+        return [self._call(messages.TOPIC_ENERGY_LEDGER, messages.ledger_message(values, time_s))]
+
+    def applied(self, command, time_s: float) -> Call:
+        """Return the publish call of the command held from `time_s` on."""
+        return self._call(
+            messages.TOPIC_APPLIED_COMMAND, messages.applied_command_message(command, time_s)
+        )
+
+    def diagnostics(self, level: str, name: str, hardware_id: str, message: str, values) -> None:
+        """Publish sim_node's health (level OK | WARN | ERROR) now, at the simulation time."""
+        msg = messages.health_message(level, name, hardware_id, message, values, self.sim.time_s)
+        self._pubs[messages.TOPIC_DIAGNOSTICS].publish(msg)
