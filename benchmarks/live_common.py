@@ -70,6 +70,7 @@ class StateWatch:
     examples: list = field(default_factory=list)
     clock_wall: list = field(default_factory=list)  # (wall monotonic s, sim s) of each /clock
     diagnostics: list = field(default_factory=list)  # (wall s, level, message, values) of sim_node
+    diagnostics_clock: list = field(default_factory=list)  # (wall monotonic s, stamp s) of those
 
     def check(self, topic: str, numbers) -> None:
         self.messages += 1
@@ -84,11 +85,17 @@ class LiveClient:
     """
     An rclpy context + node in the test domain.
 
-    Subscribed to every state topic and /diagnostics.
+    Subscribed to every state topic (unless state_topics is false), /clock (unless clock is
+    false) and /diagnostics.
     """
 
     def __init__(
-        self, domain: int, name: str, keep_clock: bool = False, state_topics: bool = True
+        self,
+        domain: int,
+        name: str,
+        keep_clock: bool = False,
+        state_topics: bool = True,
+        clock: bool = True,
     ):
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import TwistStamped, WrenchStamped
@@ -148,7 +155,9 @@ class LiveClient:
                 ),
                 qos,
             )
-        self.node.create_subscription(Clock, interface.TOPIC_CLOCK, self._on_clock, qos)
+        self.clock_subscribed = clock
+        if clock:  # else simulated time comes from the 1 Hz /diagnostics stamps (light at 1 kHz)
+            self.node.create_subscription(Clock, interface.TOPIC_CLOCK, self._on_clock, qos)
         self.node.create_subscription(
             DiagnosticArray, interface.TOPIC_DIAGNOSTICS, self._on_diagnostics, qos
         )
@@ -162,6 +171,10 @@ class LiveClient:
     def _on_diagnostics(self, msg) -> None:
         for s in msg.status:
             if s.name.endswith('sim_node'):
+                stamp_s = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+                self.watch.diagnostics_clock.append((time.monotonic(), stamp_s))
+                if not self.clock_subscribed:
+                    self.last_clock_s = stamp_s
                 self.watch.diagnostics.append(
                     (
                         time.monotonic(),

@@ -12,8 +12,11 @@ volume): `routine` (default) sends its commands at its own rate (50 Hz of simula
 `every_state` answers every published state with one atomic command (closed_loop:=true, 1000
 commands a second at 1 kHz); with --record the recorder node writes /clock, the applied
 commands and /diagnostics to MCAP (read back at the end with rosbags). This process
-  - receives /clock and measures the real-time factor held (simulated s / wall s) over the whole
-    soak after a warm-up minute, and over each minute;
+  - measures the real-time factor held (simulated s / wall s) over the whole soak after a warm-up
+    minute, and over each minute: from /clock, or with --record from the stamps of sim_node's
+    /diagnostics (1 Hz; then this process does not take the 1 kHz /clock itself, which would cost
+    a quarter of a core of the two the system under test has) and the /clock period jitter from the
+    recording (receive times at the recorder);
   - reads sim_node's /diagnostics: watchdog trips (a trip with the controller alive is a missed
     command period), wall time dropped, physics faults, commands accepted and rejected;
   - samples every process's resident memory every 10 s; growth is measured from the end of the
@@ -121,7 +124,10 @@ def soak(
             tmp / 'recorder.log',
             env,
         )
-    client = LiveClient(domain, 'soak_monitor', keep_clock=True, state_topics=False)
+    client = LiveClient(
+        domain, 'soak_monitor', keep_clock=not record, state_topics=False, clock=not record
+    )
+    realtime_minus_monotonic = time.time() - time.monotonic()
     probe = ParamProbe(client.node)
     rss = {name: [] for name in procs}
     try:
@@ -155,7 +161,7 @@ def soak(
         exit_codes = {name: p.stop() for name, p in reversed(list(procs.items()))}
         client.close()
     measured0 = start + warm_up_s
-    clock = client.watch.clock_wall
+    clock = client.watch.diagnostics_clock if record else client.watch.clock_wall
     minute_rtf = [
         rtf_over(clock, measured0 + 60.0 * k, measured0 + 60.0 * (k + 1))
         for k in range(int(minutes))
@@ -163,7 +169,13 @@ def soak(
     diag = [d for d in client.watch.diagnostics if d[0] >= start]
     last = diag[-1][3] if diag else {}
     trips = sum(1 for _, _, _, values in diag if values.get('watchdog', '').startswith('tripped'))
-    periods = [b[0] - a[0] for a, b in zip(clock, clock[1:]) if a[0] >= measured0]
+    if record:  # receive times at the recorder (wall clock ns), from the end of the warm-up
+        received = [ns * 1e-9 - realtime_minus_monotonic for ns in clock_receive_times_ns(bag)]
+        clock_messages = len(received)
+    else:
+        received = [w for w, _ in clock]
+        clock_messages = len(clock)
+    periods = [b - a for a, b in zip(received, received[1:]) if a >= measured0]
     nominal = 1.0 / rate_hz
     growth = {}
     for name, samples in rss.items():
@@ -188,7 +200,8 @@ def soak(
         'rtf': rtf_over(clock, measured0, end),
         'rtf_minute_min': min(minute_rtf, default=float('nan')),
         'rtf_minute_max': max(minute_rtf, default=float('nan')),
-        'clock_messages': len(clock),
+        'clock_messages': clock_messages,
+        'clock_source': 'recorder' if record else 'monitor',
         'period_jitter_p99_ms': percentile([abs(p - nominal) for p in periods], 99) * 1e3,
         'watchdog_trips': trips,
         'dropped_wall_s': last.get('dropped_wall_s', '?'),
@@ -203,6 +216,18 @@ def soak(
     if record:
         result['recording'] = read_back(bag)
     return result
+
+
+def clock_receive_times_ns(path: Path) -> list[int]:
+    """Return the log (receive) times of every /clock in the recording, read with rosbags."""
+    from rosbags.highlevel import AnyReader
+
+    try:
+        with AnyReader([path]) as reader:
+            clock = [c for c in reader.connections if c.topic == interface.TOPIC_CLOCK]
+            return sorted(t for _, t, _ in reader.messages(connections=clock))
+    except Exception:  # read_back names the failure in the table
+        return []
 
 
 def read_back(path: Path) -> dict:
@@ -254,7 +279,8 @@ def table(r: dict) -> str:
             f"{r['rtf_minute_min']:.4f} / {r['rtf_minute_max']:.4f}",
         ),
         (
-            '/clock messages received; period jitter p99',
+            f"/clock messages received (at the {r.get('clock_source', 'monitor')}); period "
+            'jitter p99',
             f"{r['clock_messages']}; {r['period_jitter_p99_ms']:.3f} ms",
         ),
         ('wall time dropped by sim_node', f"{r['dropped_wall_s']} s"),
