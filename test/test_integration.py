@@ -98,7 +98,9 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
                 counts = [recorder.message_counts.get(t, 0) for t in state_topics]
                 return abs(h.time_s - DURATION_S) < 1e-9 and len(set(counts)) == 1
 
-            h.spin_until(whole_recording, 60.0, 'the recorder to take every published state')
+            h.spin_until(
+                whole_recording, 60.0, 'the recorder to take every state', check_alive=False
+            )
             assert h.processes['controller_node'].alive(), h.output('controller_node')[-3000:]
         finally:
             recorder.close()
