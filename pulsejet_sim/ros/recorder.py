@@ -26,6 +26,7 @@ from typing import Iterable, Sequence
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.writer import BagError, BagWriter, qos_profiles_yaml
 from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.node_main import freeze_start_up_objects
 from pulsejet_sim.ros.node_params import ParamSpec
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -200,6 +201,7 @@ def main(args: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         return 2
     print(f'recorder: writing {recorder.path} ({len(topics)} topics)', flush=True)
+    freeze_start_up_objects()
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
