@@ -115,7 +115,7 @@ def test_shell_mantle_marker_is_the_revolved_meridian(monkeypatch, tmp_path):
     got = {}
     qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     node.create_subscription(
-        Marker, messages.TOPIC_MANTLE_MARKER, lambda m: got.setdefault('marker', m), qos
+        Marker, messages.TOPIC_MANTLE_MARKER, lambda m: got.__setitem__('marker', m), qos
     )
     profiles = {}
     node.create_subscription(
@@ -126,16 +126,22 @@ def test_shell_mantle_marker_is_the_revolved_meridian(monkeypatch, tmp_path):
     )
     try:
         end = time.monotonic() + 120
-        while time.monotonic() < end and 'marker' not in got:
+
+        def stamp_of(msg):
+            return (msg.header.stamp.sec, msg.header.stamp.nanosec)
+
+        # a marker whose state's profile arrived too (the two subscriptions match one after the
+        # other: on a loaded machine the first markers can come before the profiles do)
+        while time.monotonic() < end and not (
+            'marker' in got and stamp_of(got['marker']) in profiles
+        ):
             executor.spin_once(timeout_sec=0.05)
         marker = got['marker']
         assert (
             marker.type == Marker.TRIANGLE_LIST
             and marker.header.frame_id == messages.BASE_FRAME_ID
         )
-        profile = profiles[
-            (marker.header.stamp.sec, marker.header.stamp.nanosec)
-        ].polygon.points  # same state
+        profile = profiles[stamp_of(marker)].polygon.points  # same state
         assert len(marker.points) == 6 * messages.MANTLE_MARKER_SEGMENTS * (len(profile) - 1)
         meridian = {
             (round(p.x, 5), round(p.y, 5)) for p in profile
