@@ -21,7 +21,6 @@ import rclpy
 from rclpy.duration import Duration
 import rclpy.executors
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rosbags.highlevel import AnyReader
 
@@ -57,6 +56,12 @@ def observation(i: int) -> Observation:
     )
 
 
+def wait_acked(publisher) -> None:
+    """Wait until the subscriptions acknowledged every sample (bounded by the test's timeout)."""
+    while not publisher.wait_for_all_acked(Duration(seconds=1)):
+        pass
+
+
 class Publisher:
     """A node in its own context on `domain` publishing pulsejet topics built by messages.py."""
 
@@ -66,9 +71,11 @@ class Publisher:
             context=self.context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO
         )
         self.node = Node('test_publisher', context=self.context)
-        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         self.pubs = {
-            t: self.node.create_publisher(messages.message_class(t), t, qos) for t in topics
+            t: self.node.create_publisher(
+                messages.message_class(t), t, messages.reliable_qos(t, 1000)
+            )
+            for t in topics
         }
 
     def wait_matched(self, timeout_s: float = 15.0) -> None:
@@ -114,7 +121,7 @@ class Publisher:
                     self.pubs[topic].publish(msg)
             time.sleep(0.002)
         for pub in self.pubs.values():
-            assert pub.wait_for_all_acked(Duration(seconds=5))
+            wait_acked(pub)
 
     def close(self) -> None:
         self.node.destroy_node()
@@ -160,8 +167,7 @@ def test_recorder_process_records_all_topics_until_sigint(
     pub = Publisher(domain, list(messages.TOPIC_TYPES))
     try:
         pub.wait_matched()
-        pub.publish_run()
-        time.sleep(0.5)  # acked by DDS; give the recorder's executor time to take them
+        pub.publish_run()  # acknowledged: the recorder writes them although it stops now
     finally:
         pub.close()
         proc.send_signal(signal.SIGINT)
@@ -209,8 +215,7 @@ def test_recorder_topic_subset_and_sigterm(tmp_path: Path, localhost_only: None)
                 if topic in pub.pubs:
                     pub.pubs[topic].publish(msg)
         for topic in topics:
-            assert pub.pubs[topic].wait_for_all_acked(Duration(seconds=5))
-        time.sleep(0.5)
+            wait_acked(pub.pubs[topic])
     finally:
         pub.close()
         proc.send_signal(signal.SIGTERM)
@@ -262,3 +267,28 @@ def test_recorder_class_in_process(tmp_path: Path, localhost_only: None) -> None
     assert [m.wrench.force.x for m in read_all(path)['/pulsejet/thrust']] == [
         0.25 * i for i in range(5)
     ]
+
+
+@pytest.mark.timeout(60)
+def test_recorder_gets_applied_command_published_before_it_matched(
+    tmp_path: Path, localhost_only: None
+) -> None:
+    """The held command goes out once at t=0; a recorder that matches later still records it."""
+    domain = domain_id(3)
+    topic = messages.TOPIC_APPLIED_COMMAND
+    pub = Publisher(domain, [topic])
+    proc = None
+    try:
+        held = Command(2e-4, 0.5, 0.0)
+        pub.pubs[topic].publish(messages.applied_command_message(held, 0.0))
+        proc, out = start_recorder(tmp_path, domain, [topic])
+        pub.wait_matched()
+        wait_acked(pub.pubs[topic])
+    finally:
+        pub.close()
+        if proc is not None:
+            proc.send_signal(signal.SIGINT)
+            proc.communicate(timeout=15)
+    assert proc.returncode == 0
+    (recorded,) = read_all(out)['/' + topic]
+    assert messages.command_from_applied(recorded) == (0.0, held)

@@ -178,6 +178,12 @@ class BagWriter:
             return dict(self._counts)
 
     @property
+    def message_count(self) -> int:
+        """Messages written on every topic together."""
+        with self._lock:
+            return sum(self._counts.values())
+
+    @property
     def topics(self) -> dict[str, str]:
         """Qualified topic name -> type name of every added topic."""
         with self._lock:

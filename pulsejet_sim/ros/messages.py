@@ -21,6 +21,7 @@ from pulsejet_sim.interface import (  # noqa: F401  (re-exported: the names of e
     COMMAND_FIELDS,
     COMMAND_TOPICS,
     FRAME_ID,
+    LATCHED_TOPICS,
     LEDGER_HARDWARE_ID,
     LEDGER_STATUS_NAME,
     LEDGER_WARN_RELATIVE,
@@ -49,6 +50,7 @@ from pulsejet_sim.interface import (  # noqa: F401  (re-exported: the names of e
     TOPIC_VOLUME,
 )
 from pulsejet_sim.models.base import Command, Observation
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -73,6 +75,22 @@ def message_class(topic: str) -> type:
         raise ValueError(
             f'topic {topic!r} is not a pulsejet topic; allowed: {sorted(TOPIC_TYPES)}'
         ) from None
+
+
+def reliable_qos(topic: str, depth: int) -> QoSProfile:
+    """
+    Return the reliable QoS of `topic` (relative or resolved name) at `depth`.
+
+    Transient local for interface.LATCHED_TOPICS, volatile otherwise; publishers and subscribers
+    of a latched topic must both use it (a transient-local subscription ignores volatile writers).
+    """
+    latched = any(topic == name or topic.endswith('/' + name) for name in LATCHED_TOPICS)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )
 
 
 def stamp(time_s: float) -> Time:

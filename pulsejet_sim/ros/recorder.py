@@ -10,7 +10,8 @@ clock, ns), like `ros2 bag record`; analysis uses the simulation-time header sta
 Parameters (read-only, with descriptors: `ros2 param describe /recorder output`): `output` (path;
 default runs/<UTC date-time>.mcap), `topics` (string array; default every pulsejet topic incl.
 commands, the energy ledger and /clock; an entry may be `name:pkg/msg/Type` for a topic outside the
-pulsejet set). On SIGINT/SIGTERM the file is closed complete and its path printed.
+pulsejet set). On SIGINT/SIGTERM the messages already delivered are written (none that DDS
+acknowledged is lost), the file is closed complete and its path printed.
 `Recorder(node, path, topics)` does the same inside another process's node.
 """
 
@@ -19,7 +20,9 @@ from __future__ import annotations
 import datetime
 import importlib
 from pathlib import Path
+import signal
 import sys
+import threading
 import time
 from typing import Iterable, Sequence
 
@@ -31,13 +34,10 @@ from pulsejet_sim.ros.node_params import ParamSpec
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-# State and command topics: reliable and deep, so a burst from a fast simulation is not dropped.
-STATE_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1000,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+# State and command topics: reliable and deep, so a burst from a fast simulation is not dropped
+# (transient local for interface.LATCHED_TOPICS, so the recorder gets what was published before
+# the publisher's writer matched it).
+QOS_DEPTH = 1000
 # /clock: best effort matches both best-effort and reliable publishers (a reliable subscription
 # would not match a best-effort clock publisher).
 CLOCK_QOS = QoSProfile(
@@ -46,6 +46,8 @@ CLOCK_QOS = QoSProfile(
     reliability=ReliabilityPolicy.BEST_EFFORT,
     durability=DurabilityPolicy.VOLATILE,
 )
+STOP_POLL_S = 0.1  # a signal ends the recording within this time
+DRAIN_IDLE_SPINS = 5  # at shutdown, taking stops after this many spins that wrote nothing
 FLUSH_PERIOD_S = 1.0  # an idle recorder still pushes its last chunk to disk within this time
 # read-only: the file and its topics are fixed at start-up
 PARAMETERS = (
@@ -118,6 +120,13 @@ def import_message_class(type_name: str) -> type:
         ) from None
 
 
+def subscription_qos(resolved_topic: str) -> QoSProfile:
+    """Return the QoS the recorder subscribes `resolved_topic` with."""
+    if resolved_topic == '/clock':
+        return CLOCK_QOS
+    return messages.reliable_qos(resolved_topic, QOS_DEPTH)
+
+
 class Recorder:
     """
     Subscribe raw to `topics` on `node` and write every message to `path` until close().
@@ -135,7 +144,7 @@ class Recorder:
         self._subscriptions = []
         for name, type_name in wanted.items():
             resolved = node.resolve_topic_name(name)
-            qos = CLOCK_QOS if resolved == '/clock' else STATE_QOS
+            qos = subscription_qos(resolved)
             callback = self._make_callback(resolved, type_name)
             self._subscriptions.append(
                 node.create_subscription(
@@ -165,6 +174,15 @@ class Recorder:
     def message_counts(self) -> dict[str, int]:
         return self.writer.message_counts
 
+    def drain(self, executor) -> None:
+        """Write the messages already delivered to the subscriptions (spins `executor`)."""
+        idle_spins = 0
+        # a spin runs one callback; the flush timer's may be one that writes nothing
+        while idle_spins < DRAIN_IDLE_SPINS:
+            before = self.writer.message_count
+            executor.spin_once(timeout_sec=0.0)
+            idle_spins = idle_spins + 1 if self.writer.message_count == before else 0
+
     def close(self) -> Path:
         """Stop recording and close the file (idempotent); returns its path."""
         for sub in self._subscriptions:
@@ -179,9 +197,15 @@ class Recorder:
 
 def main(args: list[str] | None = None) -> int:
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
-    rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that make spin() return
+    # rclpy's own handlers would shut the context down, and with it the messages delivered but
+    # not yet taken; here a signal only ends the spinning
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
     node = Node('recorder')
     values = {
         spec.name: node.declare_parameter(
@@ -202,10 +226,13 @@ def main(args: list[str] | None = None) -> int:
         return 2
     print(f'recorder: writing {recorder.path} ({len(topics)} topics)', flush=True)
     freeze_start_up_objects()
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
     try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=STOP_POLL_S)
+        if rclpy.ok():
+            recorder.drain(executor)
     finally:
         path = recorder.close()
         counts = recorder.message_counts

@@ -66,6 +66,7 @@ from pulsejet_sim.bag.reader import BagInfo, BagReadError, iter_bag
 
 CLOCK_TOPIC = '/clock'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
+QOS_DEPTH = 100  # published samples kept for a slow subscriber
 MAX_SLEEP_S = 0.05  # longest single sleep: a stop request is seen within this time
 ACK_TIMEOUT_S = 2.0  # at exit, wait at most this long for subscribers to acknowledge
 MIN_PASS_S = 0.01  # a looping pass lasts at least this long (a one-instant file does not spin)
@@ -449,7 +450,7 @@ class Player:
     """Publishes a Schedule on `node` at its recorded pace; run() returns when done or stopped."""
 
     def __init__(self, node: Any, schedule: Schedule, cfg: ReplayConfig, log=print) -> None:
-        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from pulsejet_sim.ros.messages import reliable_qos
         from rosgraph_msgs.msg import Clock
 
         self._Clock = Clock
@@ -457,19 +458,6 @@ class Player:
         self.schedule = schedule
         self.cfg = cfg
         self.log = log
-        state_qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST,
-            depth=100,
-            reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.VOLATILE,
-        )
-        # a reliable publisher matches both reliable and best-effort subscriptions
-        clock_qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST,
-            depth=100,
-            reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.VOLATILE,
-        )
         self.publishers: dict[str, Any] = {}
         skipped = set()
         for topic, type_name in schedule.topics.items():
@@ -479,8 +467,9 @@ class Player:
                 log(f'replay: warning: {topic} skipped: {err}', file=sys.stderr)
                 skipped.add(topic)
                 continue
+            # reliable (/clock too: it matches reliable and best-effort subscriptions)
             self.publishers[topic] = node.create_publisher(
-                cls, topic, clock_qos if topic == CLOCK_TOPIC else state_qos
+                cls, topic, reliable_qos(topic, QOS_DEPTH)
             )
         if skipped:
             schedule.events = [e for e in schedule.events if e.topic not in skipped]

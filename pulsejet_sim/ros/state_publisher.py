@@ -16,15 +16,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from pulsejet_sim.engine.session import observation_is_finite
 from pulsejet_sim.ros import messages
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import Marker
 
 #: the meridian (tens of points) at most this often: at 1 kHz it would cost more than the rest of
 #: the state; every ledger publication carries one too
 PROFILE_RATE_MAX_HZ = 100.0
-RELIABLE = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE
-)
+QOS_DEPTH = 10
 
 Call = Callable[[], object]
 
@@ -53,7 +50,8 @@ class StatePublisher:
             )
             classes[messages.TOPIC_MANTLE_MARKER] = Marker
         self._pubs = {
-            topic: node.create_publisher(cls, topic, RELIABLE) for topic, cls in classes.items()
+            topic: node.create_publisher(cls, topic, messages.reliable_qos(topic, QOS_DEPTH))
+            for topic, cls in classes.items()
         }
         self._profile_every = max(1, int(math.ceil(publish_rate_hz / PROFILE_RATE_MAX_HZ - 1e-9)))
         self._states_built = 0
