@@ -212,7 +212,8 @@ EXPERIMENTS = {
         ('paper',),
         True,
         'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment F", before any '
-        "run): the study's wall is a Kelvin-Voigt solid with `eta_v` = 500 Pa s (the authors' code; "
+        "run): the study's wall is a Kelvin-Voigt solid with `eta_v` = 500 Pa s (the authors' "
+        'code; '
         'paper 000 gives no value); the estimated damping ratio of the breathing mode, '
         '`3 eta_v omega_n / (2 E)`, is 1.8, 1.3, 0.9 at 20, 40, 80 kPa, so no resonant peak can '
         "exist. Here the wall's viscosity is a tenth of it (estimated damping ratio 0.18, 0.13, "
