@@ -12,9 +12,10 @@ arrive per actuator (std_msgs/Float64) or atomically on pulsejet/cmd/command
 (sensor_msgs/JointState, every named actuator at the same step); subscriptions are best effort, so
 reliable and best-effort publishers both connect. A non-finite or out-of-range value is rejected
 with a warning naming it (throttled; /diagnostics counts every one); the held command is kept.
-Commands reach the pacing thread through an inbox, so the executor never waits for a physics batch;
-the kernels release the GIL while they step. Reset returns to the scene's initial state and command
-at time 0 (/clock jumps back, like a Gazebo world reset). The diagnostic status is named after the
+Commands reach the pacing thread (`pulsejet_sim.engine.live_loop.LiveLoop`) through an inbox, so
+the executor never waits for a physics batch; the kernels release the GIL while they step. Reset
+returns to the scene's initial state and command at time 0 (/clock jumps back, like a Gazebo world
+reset). The diagnostic status is named after the
 node's fully qualified name, so two robots in one domain stay apart.
 Exit code: 0 on duration reached or SIGINT/SIGTERM, 1 when stopped after a blow-up, 2 on a bad
 scene or parameter.
@@ -22,15 +23,14 @@ scene or parameter.
 
 from __future__ import annotations
 
-import collections
 import signal
 import sys
-import threading
 import time
 
 from pulsejet_sim.engine import session as eng
+from pulsejet_sim.engine.live_loop import LiveLoop
 from pulsejet_sim.engine.outbox import TimedOutbox
-from pulsejet_sim.models.base import CommandError, SimulationBlowUp
+from pulsejet_sim.models.base import SimulationBlowUp
 from pulsejet_sim.ros import messages
 from pulsejet_sim.ros import sim_node_params as params
 from pulsejet_sim.ros.node_params import check_parameters
@@ -56,20 +56,8 @@ class SimNode(Node):
         from pulsejet_sim.simulation import Simulation
 
         self._ready = False
-        # the pacing thread and the executor thread (commands, services, parameters, diagnostics)
-        # share the session under this lock
-        self._lock = threading.RLock()
-        self._stop_pacing = threading.Event()
-        # commands go through this inbox instead of the lock: the executor never waits for a
-        # physics batch to hand one over (the pacing thread applies them, in arrival order, before
-        # it steps)
-        self._inbox = collections.deque()
-        self._wake = threading.Event()
-        self._outbox = TimedOutbox(
-            name='sim_node publication'
-        )  # states computed ahead (lookahead_s)
+        self._outbox = TimedOutbox(name='sim_node publication')  # states computed ahead
         self._outbox_due = None  # wall time of the last batch put there
-        self._pacing_thread = None
         self._rejection_log = eng.LogThrottle(REJECTION_LOG_BURST, REJECTION_LOG_RATE_HZ)
         self._finished = False
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -83,6 +71,10 @@ class SimNode(Node):
         config = params.session_config(p, rate)
         self.session = eng.Session(sim, config, now=time.monotonic())
         self.sim = sim
+        # commands, services, parameters and diagnostics reach the session through the loop
+        self.loop = LiveLoop(
+            self.session, 1.0 / rate, self._emit, self._warn_rejected, self._on_failure, self._tick
+        )
         self.wait_for_subscribers = p['wait_for_subscribers']
         self.wait_timeout_s = p['wait_timeout_s']
         self.status_name = f'pulsejet: {self.get_fully_qualified_name()}'
@@ -99,7 +91,6 @@ class SimNode(Node):
         self.create_service(SetBool, messages.SERVICE_PAUSE, self._on_pause)
         self.create_service(Trigger, messages.SERVICE_STEP, self._on_step)
         self.create_service(Trigger, messages.SERVICE_RESET, self._on_reset)
-        self.tick_period_s = 1.0 / rate
         self.wait_started = time.monotonic()
         self._waiting_published = False
         self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
@@ -121,18 +112,11 @@ class SimNode(Node):
         return self.session.exit_code
 
     def start(self):
-        if self._pacing_thread is None:
-            self._pacing_thread = threading.Thread(
-                target=self._pacing_loop, name='sim_node pacing', daemon=True
-            )
-            self._pacing_thread.start()
-            self._outbox.start()
+        self._outbox.start()
+        self.loop.start()
 
     def close(self):
-        self._stop_pacing.set()
-        self._wake.set()
-        if self._pacing_thread is not None:
-            self._pacing_thread.join(2.0)
+        self.loop.close()
         self._outbox.close()
 
     def on_stop(self, signum):
@@ -156,35 +140,7 @@ class SimNode(Node):
             self.get_logger().error(f'physics blew up on the first step: {exc}')
         sim.reset()
 
-    # -- pacing thread --------------------------------------------------------------------------
-    def _pacing_loop(self):
-        period = self.tick_period_s
-        next_tick = time.monotonic()
-        while not self._stop_pacing.is_set() and not self.session.done:
-            # before draining: a command arriving from here on wakes the wait below
-            self._wake.clear()
-            now = time.monotonic()
-            try:
-                with self._lock:
-                    self._apply_inbox()  # in closed_loop pacing this runs the next control period
-                    if now >= next_tick:
-                        self._emit(self._tick(now))
-                        next_tick += period
-                        # more than a period late: restart the grid (no burst)
-                        if next_tick < now - period:
-                            next_tick = now
-            except Exception as exc:  # a bug: report it, stop the node with a failure
-                import traceback
-
-                traceback.print_exc()
-                self.get_logger().error(f'pacing thread stopped: {type(exc).__name__}: {exc}')
-                self.session.exit_code = 2
-                self.session.done = self._finished = True
-                return
-            delay = next_tick - time.monotonic()
-            if delay > 0:
-                self._wake.wait(delay)  # a command (or the stop) wakes the loop early
-
+    # -- pacing thread (LiveLoop) ---------------------------------------------------------------
     def _tick(self, now: float) -> list:
         s = self.session
         if s.started:
@@ -239,6 +195,10 @@ class SimNode(Node):
                 self._outbox.flush()
                 self._publish_diagnostics()
 
+    def _on_failure(self, text):
+        self.get_logger().error(text)
+        self._finished = True
+
     def _send_now(self, calls):
         self._outbox.flush()  # what was computed earlier goes first
         for call in calls:
@@ -247,7 +207,7 @@ class SimNode(Node):
     # -- commands -------------------------------------------------------------------------------
     def _on_actuator(self, topic, field):
         def callback(msg: Float64):
-            self._accept({field: msg.data}, None, topic)
+            self.loop.accept({field: msg.data}, None, topic)
 
         return callback
 
@@ -255,31 +215,9 @@ class SimNode(Node):
         try:
             stamp_s, values = messages.command_values(msg)
         except ValueError as exc:
-            # counted and logged in order with the others, by the pacing thread
-            self._accept(
-                None, None, f'{messages.TOPIC_CMD_COMMAND}: rejected: {exc}; command kept'
-            )
+            self.loop.reject(f'{messages.TOPIC_CMD_COMMAND}: rejected: {exc}; command kept')
             return
-        self._accept(values, stamp_s, messages.TOPIC_CMD_COMMAND)
-
-    def _accept(self, values, stamp_s, source):
-        self._inbox.append((values, stamp_s, source, time.monotonic()))
-        self._wake.set()
-
-    def _apply_inbox(self):
-        """Apply the commands received so far (under the lock, before any stepping or service)."""
-        while self._inbox:
-            values, stamp_s, source, received = self._inbox.popleft()
-            if values is None:  # a message that did not parse; `source` holds the reason
-                self.session.command_counts['rejected'] += 1
-                self._warn_rejected(source)
-                continue
-            try:
-                events = self.session.accept(values, received, stamp_s, source)
-            except CommandError as exc:
-                self._warn_rejected(f'{source}: {exc}; command kept at {self.session.command}')
-                continue
-            self._emit(events)
+        self.loop.accept(values, stamp_s, messages.TOPIC_CMD_COMMAND)
 
     def _warn_rejected(self, text):
         text = self._rejection_log.admit(text, time.monotonic())
@@ -288,22 +226,18 @@ class SimNode(Node):
 
     # -- parameters and services ----------------------------------------------------------------
     def _on_set_parameters(self, parameters):
-        with self._lock:
-            self._apply_inbox()
-            checked, rejection = check_parameters(parameters, params.PARAMETER_SPECS)
-            if (
-                rejection is not None or not self._ready
-            ):  # at declaration the values are read in __init__
-                return rejection or SetParametersResult(successful=True)
+        checked, rejection = check_parameters(parameters, params.PARAMETER_SPECS)
+        if rejection is not None or not self._ready:  # at declaration __init__ reads the values
+            return rejection or SetParametersResult(successful=True)
+        with self.loop.locked():
             for name, value in checked.items():
                 if name in params.LIVE_CONFIG and value != getattr(self.session.config, name):
                     self._emit(self.session.configure(name, value, time.monotonic()))
                     self.get_logger().info(f'{name} set to {value}')
-            return SetParametersResult(successful=True)
+        return SetParametersResult(successful=True)
 
     def _on_pause(self, request, response):
-        with self._lock:
-            self._apply_inbox()
+        with self.loop.locked():
             response.success, response.message, events = self.session.pause(
                 bool(request.data), time.monotonic()
             )
@@ -311,15 +245,13 @@ class SimNode(Node):
         return response
 
     def _on_step(self, request, response):
-        with self._lock:
-            self._apply_inbox()
+        with self.loop.locked():
             response.success, response.message, events = self.session.step(time.monotonic())
             self._emit(events)
         return response
 
     def _on_reset(self, request, response):
-        with self._lock:
-            self._apply_inbox()
+        with self.loop.locked():
             message, events = self.session.reset(time.monotonic())
             self._emit(events)
         response.success = True
@@ -328,8 +260,7 @@ class SimNode(Node):
 
     # -- diagnostics ----------------------------------------------------------------------------
     def _publish_diagnostics(self):
-        with self._lock:
-            self._apply_inbox()
+        with self.loop.locked():
             level, message, values = self.session.health(time.monotonic())
             self.out.diagnostics(
                 level, self.status_name, self.get_fully_qualified_name(), message, values
