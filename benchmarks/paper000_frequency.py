@@ -1,0 +1,123 @@
+"""
+Paper 000 study, experiment F.3: the internal ellipsoid's response to the routine's frequency.
+
+docs/PHYSICS_SHELL.md, "Experiment F". Not the study: the study's internal ellipsoid at 20 kPa in
+the `paper` coupling, its routine's frequency swept (contraction 30 % and release 45 % of the
+period, as the study's routines), at the study's wall viscosity and a tenth of it; every run again
+at twice the elements and half the step. Writes benchmarks/results/paper000_study/frequency.md.
+
+    .venv/bin/python benchmarks/paper000_frequency.py
+"""
+
+from __future__ import annotations
+
+import datetime
+import math
+import os
+from pathlib import Path
+import platform
+import sys
+import time
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import paper000_study as study  # noqa: E402
+from pulsejet_sim.models.base import SimulationBlowUp  # noqa: E402
+from pulsejet_sim.scene import load_scene  # noqa: E402
+from pulsejet_sim.simulation import Simulation  # noqa: E402
+from pulsejet_sim.sweep import load_sweep, merge  # noqa: E402
+
+OUT = study.OUT / 'frequency.md'
+CASE = 'internal/paper/ellipsoid/E20k/T0.66'
+FREQUENCIES_HZ = (1.27, 1.89, 2.5, 3.5, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 12.0)
+CONTRACTION, RELEASE = 0.30, 0.45  # fractions of the period (the study's routines)
+VISCOSITIES_PA_S = (500.0, 50.0)
+DURATION_S = 4.0
+REFINED = {'mesh': {'elements': 192}, 'simulation': {'dt_s': 2.5e-4}}
+
+
+def response(spec, frequency_hz: float, viscosity_pa_s: float, refined: bool) -> dict:
+    """Return the last full period's volume stroke and the run's peak speed."""
+    period = 1.0 / frequency_hz
+    overrides = merge(
+        dict(spec.overrides),
+        {
+            'material': {'viscosity_pa_s': viscosity_pa_s},
+            'actuation': {
+                'frequency_hz': frequency_hz,
+                'contraction_s': CONTRACTION * period,
+                'release_s': RELEASE * period,
+            },
+        },
+    )
+    if refined:
+        overrides = merge(overrides, REFINED)
+    sim = Simulation(load_scene(spec.scene, overrides, replace=spec.replace).model)
+    last_start = (math.floor(DURATION_S / period) - 1) * period
+    volumes, peak, fault = [], 0.0, ''
+    try:
+        for _ in range(int(round(DURATION_S / sim.model.dt_s))):
+            obs = sim.step(1, sim.command)
+            peak = max(peak, abs(obs.velocity_m_s))
+            if last_start <= obs.time_s < last_start + period:
+                volumes.append(obs.volume_m3)
+    except SimulationBlowUp as err:
+        fault = str(err).split(' (')[0]
+    stroke = max(volumes) - min(volumes) if volumes and not fault else math.nan
+    return {'stroke_m3': stroke, 'peak_m_s': peak, 'fault': fault}
+
+
+def main() -> int:
+    _, runs = load_sweep(study.SWEEP)
+    spec = next(r for r in runs if r.name == CASE)
+    start = time.perf_counter()
+    table = {}
+    worst = 0.0
+    for viscosity in VISCOSITIES_PA_S:
+        for f in FREQUENCIES_HZ:
+            res = response(spec, f, viscosity, refined=False)
+            fine = response(spec, f, viscosity, refined=True)
+            table[viscosity, f] = res, fine
+            if not (res['fault'] or fine['fault']):
+                worst = max(worst, abs(res['stroke_m3'] / fine['stroke_m3'] - 1.0))
+                worst = max(worst, abs(res['peak_m_s'] / fine['peak_m_s'] - 1.0))
+            print(viscosity, f, res, fine, file=sys.stderr, flush=True)
+    lines = []
+    for viscosity in VISCOSITIES_PA_S:
+        base = table[viscosity, FREQUENCIES_HZ[0]][0]['stroke_m3']
+        for f in FREQUENCIES_HZ:
+            res, fine = table[viscosity, f]
+            lines.append(
+                f'| {viscosity:g} | {f:g} | {res["stroke_m3"] * 1e6:.2f} '
+                f'({fine["stroke_m3"] * 1e6:.2f}) | {res["stroke_m3"] / base:.3f} | '
+                f'{res["peak_m_s"]:.4g} ({fine["peak_m_s"]:.4g}) | '
+                f'{res["fault"] or fine["fault"] or "-"} |'
+            )
+    wall = time.perf_counter() - start
+    now = datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
+    text = (
+        "# Paper 000 study, experiment F.3: the ellipsoid's response to the routine's frequency\n\n"
+        f'{now}, {platform.machine()}, {os.cpu_count()} cores, '
+        f'Python {platform.python_version()}; '
+        f'command `.venv/bin/python benchmarks/paper000_frequency.py`, one process, '
+        f'{wall:.0f} s wall.\n\n'
+        'Not the study (docs/PHYSICS_SHELL.md, "Experiment F", written before this ran): '
+        f'`{CASE}` (96 elements, 0.5 ms) with the routine at each frequency, contraction '
+        f'{CONTRACTION:.0%} and release {RELEASE:.0%} of the period, {DURATION_S:g} s, at the '
+        "study's wall viscosity and a tenth of it. Stroke: largest minus smallest volume over "
+        'the last full period; relative: over the stroke at the slowest routine. In brackets: '
+        'the same run at 192 elements, 0.25 ms. The study routines: 1.27, 1.52, 1.89 Hz.\n\n'
+        '| eta_v (Pa s) | routine (Hz) | stroke ml (refined) | relative | peak speed m/s '
+        '(refined) | stopped |\n'
+        '|---:|---:|---|---:|---|---|\n' + '\n'.join(lines) + '\n\n'
+        'Resolution: largest relative change of stroke or peak speed at 192 elements / '
+        f'0.25 ms, over the runs that did not stop: {worst * 100:.2f} %.\n'
+    )
+    OUT.write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
