@@ -97,7 +97,8 @@ def main() -> int:
     wall = time.perf_counter() - start
     now = datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
     text = (
-        "# Paper 000 study, experiment F.3: the ellipsoid's response to the routine's frequency\n\n"
+        '# Paper 000 study, experiment F.3: '
+        "the ellipsoid's response to the routine's frequency\n\n"
         f'{now}, {platform.machine()}, {os.cpu_count()} cores, '
         f'Python {platform.python_version()}; '
         f'command `.venv/bin/python benchmarks/paper000_frequency.py`, one process, '
