@@ -122,17 +122,18 @@ CABLE_SPEC = {
     'contraction_s': Number(0.2, 0.0, 100.0, low_open=True, unit='s'),
     'release_s': Number(0.3, 0.0, 100.0, low_open=True, unit='s'),
     'start_delay_s': Number(0.0, 0.0, 1e6, unit='s'),
+    'pulse': Choice('half_cosine', ('half_cosine', 'triangle')),
 }
 
 
 @dataclass
 class CableRoutine:
     """
-    Periodic cable pull: half-cosine rise, half-cosine release, slack.
+    Periodic cable pull: a rise, a release, slack.
 
-    Periodic cable pull: a half-cosine rise to amplitude_n over contraction_s, a half-cosine
-    release over release_s, slack for the rest of the period (the shape of the shell model's
-    built-in routine, so live and offline runs pull alike).
+    A half-cosine rise to amplitude_n over contraction_s, a half-cosine release over release_s,
+    slack for the rest of the period; straight lines with pulse='triangle' (the shapes of the shell
+    model's built-in routine, so live and offline runs pull alike).
     """
 
     amplitude_n: float = 8.0
@@ -140,6 +141,7 @@ class CableRoutine:
     contraction_s: float = 0.2
     release_s: float = 0.3
     start_delay_s: float = 0.0
+    pulse: str = 'half_cosine'
 
     def __post_init__(self):
         if self.contraction_s + self.release_s > 1.0 / self.frequency_hz + 1e-12:
@@ -165,9 +167,13 @@ class CableRoutine:
         period = 1.0 / self.frequency_hz
         phase = t - period * math.floor(t / period)
         if phase < self.contraction_s:
-            return 0.5 * (1.0 - math.cos(math.pi * phase / self.contraction_s))
+            rise = phase / self.contraction_s
+            return rise if self.pulse == 'triangle' else 0.5 * (1.0 - math.cos(math.pi * rise))
         if phase < self.contraction_s + self.release_s:
-            return 0.5 * (1.0 + math.cos(math.pi * (phase - self.contraction_s) / self.release_s))
+            fall = (phase - self.contraction_s) / self.release_s
+            if self.pulse == 'triangle':
+                return 1.0 - fall
+            return 0.5 * (1.0 + math.cos(math.pi * fall))
         return 0.0
 
     def command(self, time_s: float, volume_m3: float | None = None) -> Command:

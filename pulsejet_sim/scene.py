@@ -161,7 +161,7 @@ def command_driven_data(data: dict[str, Any]) -> dict[str, Any]:
     ):
         return data
     routine = {'kind': 'cable', 'amplitude_n': actuation.get('amplitude', 0.0)}
-    for key in ('frequency_hz', 'contraction_s', 'release_s', 'start_delay_s'):
+    for key in ('frequency_hz', 'contraction_s', 'release_s', 'start_delay_s', 'pulse'):
         if key in actuation:
             routine[key] = actuation[key]
     return dict(data, actuation=dict(actuation, source='command'), routine=routine)

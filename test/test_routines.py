@@ -67,3 +67,9 @@ def test_cable_routine_pulls_with_half_cosines_and_rests():
     assert r.command(1.2).cable_force_n == pytest.approx(10.0)  # periodic
     with pytest.raises(ModelError, match='exceeds the period'):
         CableRoutine(frequency_hz=5.0, contraction_s=0.2, release_s=0.3)
+    triangle = CableRoutine(10.0, 1.0, 0.5, 0.5, 0.0, 'triangle')  # the authors' code's pulse
+    assert [triangle.command(t).cable_force_n for t in (0.1, 0.5, 0.6, 1.0)] == pytest.approx(
+        [2.0, 10.0, 8.0, 0.0]
+    )
+    with pytest.raises(ModelError, match="routine.pulse.*'saw'"):
+        routine_from_scene({'kind': 'cable', 'pulse': 'saw'})

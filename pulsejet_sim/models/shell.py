@@ -116,6 +116,7 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
                  taper_fraction: 0.15, desired_radius: proportional|constant_depth|
                  constant_depth_to_edge (muscle),
                  frequency_hz, contraction_s, release_s, start_delay_s,
+                 pulse: half_cosine|triangle (the rise and fall's shape),
                  max_cable_force_n (cable): the cable actuator's rating, N; a command above it is
                  refused (CommandError). Default twice the amplitude when the scene gives one: the
                  wall has no contact model, so a pull that folds the mantle onto itself (about
@@ -125,10 +126,11 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
     load:       {internal_pressure_pa: 0}   (static pressure load, for tests)
     initial:    {radial_perturbation_m: 0}  (r += d sin(pi X/L) at t = 0)
 
-The cable routine: activation ``a(t)`` rises as a half cosine over ``contraction_s``, falls over
-``release_s`` and rests for the rest of the period; the cable pull is ``amplitude * a(t)``
-distributed over the free nodes with weights uniform, proportional to X/L (``rising``: largest
-at the ring) or to 1 - X/L (``falling``: largest at the pole).  The muscle routine lowers the
+The cable routine: activation ``a(t)`` rises as a half cosine (``pulse: triangle``: a straight
+line) over ``contraction_s``, falls over ``release_s`` and rests for the rest of the period; the
+cable pull is ``amplitude * a(t)`` distributed over the free nodes with weights uniform,
+proportional to X/L (``rising``: largest at the ring) or to 1 - X/L (``falling``: largest at the
+pole).  The muscle routine lowers the
 desired hoop stretch to ``tau_d = 1 - amplitude a(t) s(X)`` (``s`` = 1 with smooth tapers at the
 ends, at the pole only for ``constant_depth_to_edge``); the work it does is ``dW/dt`` at fixed
 shape.
@@ -170,6 +172,9 @@ DISTRIBUTIONS = ('uniform', 'rising', 'falling')
 COUPLINGS = ('consistent', 'paper', 'paper_code')
 OUTLETS = ('ring', 'edge', 'free_edge_fixed_nozzle')
 DESIRED_RADIUS = ('proportional', 'constant_depth', 'constant_depth_to_edge')
+#: the routine's rise and fall: half cosines, or straight lines (the authors' code's
+#: `triangularPulse`, paper 000's study)
+PULSE_SHAPES = {'half_cosine': sk.PULSE_HALF_COSINE, 'triangle': sk.PULSE_TRIANGLE}
 ERR_TEXT = {
     sk.ERR_NONFINITE: 'non-finite state (NaN/inf)',
     sk.ERR_AXIS: 'the mantle wall crossed the symmetry axis (r < 0): the collapse is too deep for '
@@ -610,7 +615,7 @@ class ShellModel:
         if terms['vehicle_motion']:
             flags |= sk.F_BODY
         amp = 0.0
-        freq, tc, tr, delay = 1.0, 0.3, 0.3, 0.0
+        freq, tc, tr, delay, pulse = 1.0, 0.3, 0.3, 0.0, 'half_cosine'
         actuation = {'kind': akind, 'source': 'none'}
         if akind != 'none':
             common = (
@@ -621,6 +626,7 @@ class ShellModel:
                 'contraction_s',
                 'release_s',
                 'start_delay_s',
+                'pulse',
             )
             extra = (
                 ('distribution', 'max_cable_force_n')
@@ -690,12 +696,14 @@ class ShellModel:
                         'allowed: contraction_s + release_s <= period'
                     )
                 delay = _num(act, 'start_delay_s', 'actuation', 0.0, 1e6, default=0.0)
+                pulse = _choice(act, 'pulse', 'actuation', tuple(PULSE_SHAPES), 'half_cosine')
                 actuation.update(
                     amplitude=amp,
                     frequency_hz=freq,
                     contraction_s=tc,
                     release_s=tr,
                     start_delay_s=delay,
+                    pulse=pulse,
                 )
 
         # ---- parameters
@@ -717,6 +725,7 @@ class ShellModel:
         P[sk.P_MSHELL] = shell_free_mass
         P[sk.P_AMP] = amp
         P[sk.P_FREQ] = freq
+        P[sk.P_PULSE] = PULSE_SHAPES[pulse]
         P[sk.P_TC] = tc
         P[sk.P_TR] = tr
         P[sk.P_DT] = dt

@@ -88,7 +88,9 @@ P_HC, P_KC = 27, 28  # axis contact: radius where the inner faces meet, penalty 
 P_VSCALE = 29  # Newton velocity scale: shortest element / dt (converged when a step moves a
 # node by less than newton_tolerance times the shortest element)
 P_MSHELL = 30  # mass of the moving shell, kg (carried by the vehicle in the paper coupling)
-N_PARAMS = 31
+P_PULSE = 31  # the routine's pulse: PULSE_HALF_COSINE or PULSE_TRIANGLE
+N_PARAMS = 32
+PULSE_HALF_COSINE, PULSE_TRIANGLE = 0.0, 1.0
 
 # ---- element table E[e, :] -------------------------------------------------------------------
 E_DS, E_R0M, E_LAM0, E_ETA0, E_K0, E_VS0, E_SMUS, E_AREA = 0, 1, 2, 3, 4, 5, 6, 7
@@ -147,8 +149,8 @@ def routine(t, P):
     """
     Return the activation a(t) in [0, 1] and da/dt of the periodic routine.
 
-    Half-cosine rise over the contraction time, half-cosine fall over the release time, rest for
-    the remaining period.
+    A rise over the contraction time, a fall over the release time, rest for the remaining period;
+    half cosines, or straight lines with P[P_PULSE] = PULSE_TRIANGLE.
     """
     t = t - P[P_DELAY]
     if t < 0.0:
@@ -157,10 +159,15 @@ def routine(t, P):
     ph = t - per * math.floor(t / per)
     tc = P[P_TC]
     tr = P[P_TR]
+    triangle = P[P_PULSE] == PULSE_TRIANGLE
     if ph < tc:
+        if triangle:
+            return ph / tc, 1.0 / tc
         x = math.pi * ph / tc
         return 0.5 * (1.0 - math.cos(x)), 0.5 * math.pi / tc * math.sin(x)
     if ph < tc + tr:
+        if triangle:
+            return 1.0 - (ph - tc) / tr, -1.0 / tr
         x = math.pi * (ph - tc) / tr
         return 0.5 * (1.0 + math.cos(x)), -0.5 * math.pi / tr * math.sin(x)
     return 0.0, 0.0
