@@ -260,8 +260,14 @@ def report(
             ' checked. The readings used here (the paper coupling, the mantle edge as the nozzle,'
             " the cable load sized from the authors' code, the constant-depth muscle) were"
             " adopted after it, and the rules of findings 2-4 and the body's added mass after an"
-            ' independent review, before any outcome of this study was read. Discussion:'
-            ' docs/PHYSICS_SHELL.md.'
+            ' independent review, before any outcome of this study was read. This is the'
+            " study's second version: the first took the routines' rise and fall as 30 % / 45 %"
+            ' half cosines "because no source gives the split", but the authors\' code that it'
+            ' cites for the load and the periods gives it (a triangle, half the period up, half'
+            ' down); the value changed for that reason alone and every run was redone. The first'
+            ' version reproduced none of the five findings in either coupling; its tables and'
+            ' report are in `first_version/`, and experiments A-F (`experiments.md`) ran on it.'
+            ' Discussion: docs/PHYSICS_SHELL.md.'
         ),
         '',
     ]
