@@ -37,13 +37,16 @@ WRITER = textwrap.dedent("""
     from std_msgs.msg import Float64
     from rosgraph_msgs.msg import Clock
     from pulsejet_sim.bag.writer import BagWriter, qos_profiles_yaml
-    from pulsejet_sim.ros.recorder import CLOCK_QOS, STATE_QOS
+    from pulsejet_sim.ros.recorder import subscription_qos
     path, mode, flush = sys.argv[1], sys.argv[2], float(sys.argv[3])
     # chunks close by age only
     bag = BagWriter(path, chunk_size_bytes=1 << 20, flush_period_s=flush)
     bag.add_metadata('pulsejet', {'scene': 'escape', 'note': 'killed on purpose'})
-    bag.add_topic('pulsejet/volume', 'std_msgs/msg/Float64', qos_profiles_yaml([STATE_QOS]))
-    bag.add_topic('/clock', 'rosgraph_msgs/msg/Clock', qos_profiles_yaml([CLOCK_QOS]))
+    for topic, type_name in (
+        ('pulsejet/volume', 'std_msgs/msg/Float64'),
+        ('/clock', 'rosgraph_msgs/msg/Clock'),
+    ):
+        bag.add_topic(topic, type_name, qos_profiles_yaml([subscription_qos(topic)]))
     i = 0
     while True:
         # system-wide clock: the parent compares it with its kill time
