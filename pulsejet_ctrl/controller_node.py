@@ -50,6 +50,7 @@ import math
 import sys
 
 from pulsejet_ctrl import routines as _routines
+from pulsejet_sim.models.schema import Choice
 from pulsejet_sim.ros import messages
 from pulsejet_sim.ros.node_params import check_parameters, ParamSpec
 from pulsejet_sim.scene import DEFAULT_SCENE
@@ -72,10 +73,11 @@ ROUTINE_FIELDS = {
     'valve_opening': 'valve opening while jetting, 0..1',
     'cycles': 'number of cycles (0 = forever)',
     'start_delay_s': 's of simulated time before the first cycle',
+    'pulse': 'shape of the rise and release: half_cosine or triangle (straight lines)',
     'amplitude_n': 'peak cable pull, N',
     'frequency_hz': 'cable pulls per second of simulated time, Hz',
-    'contraction_s': 's of the half-cosine rise of the pull',
-    'release_s': 's of the half-cosine release of the pull',
+    'contraction_s': 's of the rise of the pull (see pulse)',
+    'release_s': 's of the release of the pull (see pulse)',
 }
 INTEGER_FIELDS = ('cycles',)
 #: routine kind -> field -> pulsejet_sim.models.schema.Number (default, range)
@@ -145,6 +147,17 @@ class ControllerNode(Node):
         config = dict(scene_routine, kind=kind)
         for name, number in ROUTINE_SPECS[kind].items():
             if name == 'kind':
+                continue
+            if isinstance(number, Choice):  # a word, e.g. the cable's pulse shape
+                default = scene_routine.get(name, number.default)
+                spec = ParamSpec(
+                    name,
+                    default,
+                    ROUTINE_FIELDS.get(name, name),
+                    choices=number.choices,
+                    read_only=True,
+                )
+                config[name] = self._declare(spec)
                 continue
             kind_of = int if name in INTEGER_FIELDS else float
             description = ROUTINE_FIELDS.get(name, f'{name} ({number.unit})')

@@ -375,6 +375,65 @@ def test_controller_node_follows_a_best_effort_clock_through_use_sim_time(
 
 
 @pytest.mark.timeout(120)
+def test_controller_node_pulls_a_cable_scene_with_the_pulse_it_is_given(domain, client, tmp_path):
+    """A cable scene's routine as parameters, the pulse shape (a word) among them."""
+    params = {
+        'scene': 'shell_robot',
+        'amplitude_n': 8.0,
+        'frequency_hz': 1.0,
+        'contraction_s': 0.4,
+        'release_s': 0.4,
+        'start_delay_s': 0.0,
+        'pulse': 'triangle',
+    }
+    log = open(tmp_path / 'controller.log', 'w+')
+    ctrl = subprocess.Popen(
+        node_command('pulsejet_ctrl.controller_node', params),
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        cwd=ROOT,
+    )
+    pulls = []
+    sub = client.node.create_subscription(
+        Float64, 'pulsejet/cmd/cable_force', lambda m: pulls.append(m.data), RELIABLE
+    )
+    clock_pub = client.node.create_publisher(Clock, '/clock', BEST_EFFORT)
+
+    def output():
+        log.flush()
+        return (tmp_path / 'controller.log').read_text()
+
+    def at(t):
+        """Publish /clock = t until a cable command answers it (best effort may drop one)."""
+        ns = round(t * 1e9)
+        for _ in range(20):
+            n0 = len(pulls)
+            clock_pub.publish(Clock(clock=Time(sec=ns // 10**9, nanosec=ns % 10**9)))
+            try:
+                client.spin_until(lambda: len(pulls) > n0, 0.5, 'a command')
+            except AssertionError:
+                continue
+            return pulls[-1]
+        raise AssertionError(f'no command for /clock {t} s:\n{output()[-2000:]}')
+
+    try:
+        client.spin_until(
+            lambda: clock_pub.get_subscription_count() >= 1 and sub.get_publisher_count() > 0,
+            60.0,
+            'controller_node to match /clock and pulsejet/cmd/cable_force',
+        )
+        (pulse,) = client.get('/controller_node', ['pulse'])
+        assert (pulse.type, pulse.string_value) == (ParameterType.PARAMETER_STRING, 'triangle')
+        assert at(0.1) == pytest.approx(2.0)  # a quarter of the way up a straight rise
+        assert at(0.6) == pytest.approx(4.0)  # half-way down
+        assert at(0.9) == 0.0  # slack
+    finally:
+        code, _ = stop(ctrl)
+        log.close()
+    assert code == 0, output()[-2000:]
+
+
+@pytest.mark.timeout(120)
 def test_controller_node_on_wall_time_with_use_sim_time_false(domain, client):
     """
     `-p use_sim_time:=false` puts controller_node on wall time, without any /clock.
