@@ -15,6 +15,9 @@ $(STAMP): requirements.txt setup.py setup.cfg
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps -e .
+	# pip's editable install does not run setup.py develop, whose hook warms numba's cache:
+	# compile the shipped scenes' kernels once here, so no node compiles at its first start
+	$(PY) -m pulsejet_sim.warmup --quiet
 	touch $(STAMP)
 
 demo: $(STAMP)
