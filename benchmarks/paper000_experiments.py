@@ -2,7 +2,8 @@
 Experiments explaining the paper 000 study's misses (benchmarks/results/paper000_study/README.md).
 
 Not the study: its values stay as chosen; each experiment changes one reading of the lost text and
-reruns the study's finding rules on it. Writes benchmarks/results/paper000_study/experiments.md.
+reruns the study's finding rules on it, on the study's first version (its routines: 30 % / 45 %
+half cosines; see FIRST_VERSION_ROUTINES). Writes benchmarks/results/paper000_study/experiments.md.
 
     .venv/bin/python benchmarks/paper000_experiments.py                           # all
     .venv/bin/python benchmarks/paper000_experiments.py --only fig12_edge,fixed_nozzle
@@ -60,6 +61,16 @@ FINER = {
     'simulation': {'dt_s': 1.25e-4},
 }  # for a run the refined one moves > 2 %
 MODULI = {'E20k': 20000.0, 'E40k': 40000.0, 'E80k': 80000.0}
+# Experiments A-F ran on the study's first version, whose routines were 30 % / 45 % half cosines
+# (config/sweeps/paper000_study.yaml, "pulse"; benchmarks/results/paper000_study/first_version/).
+# They are rerun on it: its routines over the second version's values (the only difference), and
+# compared with its stored table.
+FIRST_VERSION_ROUTINES = {
+    'T0.53': {'frequency_hz': 1.8868, 'contraction_s': 0.159, 'release_s': 0.2385},
+    'T0.66': {'frequency_hz': 1.5152, 'contraction_s': 0.198, 'release_s': 0.297},
+    'T0.79': {'frequency_hz': 1.2658, 'contraction_s': 0.237, 'release_s': 0.3555},
+}
+FIRST_VERSION_TABLE = study.OUT / 'first_version' / 'study.csv'
 COUPLINGS = ('paper', 'consistent')
 
 
@@ -72,6 +83,11 @@ def changed(spec: RunSpec, override: dict) -> RunSpec:
         spec.duration_s,
         spec.replace,
     )
+
+
+def first_version(spec: RunSpec) -> RunSpec:
+    routine = FIRST_VERSION_ROUTINES[dict(spec.labels)['routine']]
+    return changed(spec, {'actuation': dict(routine, pulse='half_cosine')})
 
 
 def strain_sized(spec: RunSpec) -> RunSpec:
@@ -397,7 +413,8 @@ def main(argv=None) -> int:
             f'allowed: {", ".join(EXPERIMENTS)}'
         )
     _, specs = load_sweep(study.SWEEP)
-    stored = study.read_table(study.OUT / 'study.csv')
+    specs = [first_version(s) for s in specs]
+    stored = study.read_table(FIRST_VERSION_TABLE)
     path = study.OUT / 'experiments.md'
     start = time.perf_counter()
     new = {EXPERIMENTS[k].letter: section(k, EXPERIMENTS[k], specs, stored) for k in keys}
@@ -412,7 +429,9 @@ def main(argv=None) -> int:
             '(an experiment rerun alone with `--only` states its own run in its section).\n\n'
             'Each experiment changes one reading and keeps every other value of '
             "`config/sweeps/paper000_study.yaml`; the finding rules are the study's. "
-            'Not the study: its values stay as chosen.\n'
+            'Not the study: its values stay as chosen. All of them ran on the '
+            "study's first version (routines of 30 % / 45 % half cosines, `first_version/`), "
+            "and 'study (stored)' is that version's table.\n"
         )
         sections = {}
     else:

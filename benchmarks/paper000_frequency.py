@@ -31,7 +31,9 @@ from pulsejet_sim.sweep import load_sweep, merge  # noqa: E402
 OUT = study.OUT / 'frequency.md'
 CASE = 'internal/paper/ellipsoid/E20k/T0.66'
 FREQUENCIES_HZ = (1.27, 1.89, 2.5, 3.5, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 12.0)
-CONTRACTION, RELEASE = 0.30, 0.45  # fractions of the period (the study's routines)
+# fractions of the period, half cosines: the routines of the study's first version, on which
+# experiments A-F ran
+CONTRACTION, RELEASE = 0.30, 0.45
 VISCOSITIES_PA_S = (500.0, 50.0)
 DURATION_S = 4.0
 REFINED = {'mesh': {'elements': 192}, 'simulation': {'dt_s': 2.5e-4}}
@@ -52,6 +54,7 @@ def response(spec, frequency_hz: float, viscosity_pa_s: float, resolution: dict)
                 'frequency_hz': frequency_hz,
                 'contraction_s': CONTRACTION * period,
                 'release_s': RELEASE * period,
+                'pulse': 'half_cosine',
             },
         },
     )
@@ -127,7 +130,8 @@ def main() -> int:
         f'{wall:.0f} s wall.\n\n'
         'Not the study (docs/PHYSICS_SHELL.md, "Experiment F", written before this ran): '
         f'`{CASE}` (96 elements, 0.5 ms) with the routine at each frequency, contraction '
-        f'{CONTRACTION:.0%} and release {RELEASE:.0%} of the period, {DURATION_S:g} s, at the '
+        f'{CONTRACTION:.0%} and release {RELEASE:.0%} of the period (half cosines, as in the '
+        f"study's first version), {DURATION_S:g} s, at the "
         "study's wall viscosity and a tenth of it. Stroke: largest minus smallest volume over "
         'the last full period; relative: over the stroke at the slowest routine. In brackets: '
         'the same run at 192 elements, 0.25 ms. The study routines: 1.27, 1.52, 1.89 Hz.\n\n'
