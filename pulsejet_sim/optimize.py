@@ -17,6 +17,7 @@ Optimisation file (YAML, `config/optimize/`)::
     fixed: {coupling: consistent}          # labels of the study's axes held fixed; other axes not
                                            # searched take their first label (a searched parameter
                                            # must then overwrite what that label sets)
+    overrides: {actuation: {pulse: half_cosine}}   # optional: on top of the study's overrides
     # ... or a scene:  scene: escape / overrides: {...} / replace: [...]
     duration_s: 4.0                        # default: the sweep's (or 5 s)
     objective: {metric: peak_speed_m_s, sense: max}       # a sweep metric, one of sweep.METRICS
@@ -344,7 +345,15 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
         except (SweepError, yaml.YAMLError) as err:
             raise OptimizeError(f'{p}: sweep: {err}') from None
         study = data.get('study')
-        runs = [r for r in sweep_runs if r.study == study]
+        extra = data.get('overrides') or {}
+        if not isinstance(extra, dict):
+            raise OptimizeError(f'{p}: overrides: {extra!r} rejected; allowed: a mapping')
+        # `overrides` go on top of the study's own (what the study's base must change)
+        runs = [
+            RunSpec(r.study, r.labels, r.scene, merge(r.overrides, extra), r.duration_s, r.replace)
+            for r in sweep_runs
+            if r.study == study
+        ]
         if not runs:
             raise OptimizeError(
                 f'{p}: study: {study!r} is not a study of {meta["path"]}; allowed: one of '

@@ -27,7 +27,8 @@ import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 STORED = ROOT / 'benchmarks' / 'results' / 'optimize' / 'paper000_external'
-GRID = ROOT / 'benchmarks' / 'results' / 'paper000_study' / 'study.csv'
+# the grid the stored search was compared with: the study's first version (half-cosine routines)
+GRID = ROOT / 'benchmarks' / 'results' / 'paper000_study' / 'first_version' / 'study.csv'
 
 PROBLEM = """
 name: escape_small
