@@ -50,6 +50,23 @@ def run_sim_node(*ros_args: str) -> subprocess.CompletedProcess:
     )
 
 
+def start_controller(params: dict, tmp_path: Path):
+    """Start controller_node with `params`; return (process, its log file, output())."""
+    log = open(tmp_path / 'controller.log', 'w+')
+    proc = subprocess.Popen(
+        node_command('pulsejet_ctrl.controller_node', params),
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        cwd=ROOT,
+    )
+
+    def output() -> str:
+        log.flush()
+        return (tmp_path / 'controller.log').read_text()
+
+    return proc, log, output
+
+
 def stop(proc: subprocess.Popen, timeout: float = 15.0) -> tuple[int, str]:
     """SIGTERM (a background shell may start children with SIGINT ignored), then the output."""
     if proc.poll() is None:
@@ -305,13 +322,7 @@ def test_controller_node_follows_a_best_effort_clock_through_use_sim_time(
         'target_volume_m3': 0.0,
         'rate_hz': 50.0,
     }
-    log = open(tmp_path / 'controller.log', 'w+')
-    ctrl = subprocess.Popen(
-        node_command('pulsejet_ctrl.controller_node', params),
-        stdout=log,
-        stderr=subprocess.STDOUT,
-        cwd=ROOT,
-    )
+    ctrl, log, output = start_controller(params, tmp_path)
     got = {'pump_flow': [], 'valve': []}
     subs = [
         client.node.create_subscription(
@@ -323,10 +334,6 @@ def test_controller_node_follows_a_best_effort_clock_through_use_sim_time(
         for name in got
     ]
     clock_pub = client.node.create_publisher(Clock, '/clock', BEST_EFFORT)
-
-    def output():
-        log.flush()
-        return (tmp_path / 'controller.log').read_text()
 
     try:
         client.spin_until(
@@ -386,22 +393,12 @@ def test_controller_node_pulls_a_cable_scene_with_the_pulse_it_is_given(domain, 
         'start_delay_s': 0.0,
         'pulse': 'triangle',
     }
-    log = open(tmp_path / 'controller.log', 'w+')
-    ctrl = subprocess.Popen(
-        node_command('pulsejet_ctrl.controller_node', params),
-        stdout=log,
-        stderr=subprocess.STDOUT,
-        cwd=ROOT,
-    )
+    ctrl, log, output = start_controller(params, tmp_path)
     pulls = []
     sub = client.node.create_subscription(
         Float64, 'pulsejet/cmd/cable_force', lambda m: pulls.append(m.data), RELIABLE
     )
     clock_pub = client.node.create_publisher(Clock, '/clock', BEST_EFFORT)
-
-    def output():
-        log.flush()
-        return (tmp_path / 'controller.log').read_text()
 
     def at(t):
         """Publish /clock = t until a cable command answers it (best effort may drop one)."""
