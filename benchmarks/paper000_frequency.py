@@ -3,8 +3,9 @@ Paper 000 study, experiment F.3: the internal ellipsoid's response to the routin
 
 docs/PHYSICS_SHELL.md, "Experiment F". Not the study: the study's internal ellipsoid at 20 kPa in
 the `paper` coupling, its routine's frequency swept (contraction 30 % and release 45 % of the
-period, as the study's routines), at the study's wall viscosity and a tenth of it; every run again
-at twice the elements and half the step. Writes benchmarks/results/paper000_study/frequency.md.
+period, half cosines, as the study's first version's routines), at the study's wall viscosity and
+a tenth of it; every run again at twice the elements and half the step. Writes
+benchmarks/results/paper000_study/frequency.md.
 
     .venv/bin/python benchmarks/paper000_frequency.py
 """
