@@ -37,8 +37,8 @@ SERVICE_RESET = 'pulsejet/reset'
 TOPIC_APPLIED_COMMAND = 'pulsejet/applied_command'
 # Published transient local (latched, as /tf_static): a subscriber that matches late, such as a
 # recorder that the publisher's writer discovers after the command held from t=0 went out, still
-# gets the held command. Its publishers and the recorder's subscription use that durability (a
-# transient-local subscription does not match a volatile publisher).
+# gets the held command. The recorder subscribes with the durability its publishers offer; another
+# subscriber that wants the history subscribes transient local too.
 LATCHED_TOPICS = (TOPIC_APPLIED_COMMAND,)
 # The mantle surface (the meridian revolved) as a visualization_msgs/Marker TRIANGLE_LIST for RViz
 # and Foxglove, at the energy ledger's rate; not recorded by default (a view, not data)

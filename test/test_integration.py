@@ -77,11 +77,16 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
         try:
             # every topic but the mantle profile (a shell-model topic; pump_cycle is lumped) and
             # the atomic command (sent by closed-loop controllers only)
+            expected = [
+                t if t.startswith('/') else '/' + t
+                for t in names.TOPIC_TYPES
+                if not t.endswith(('mantle_profile', 'cmd/command'))
+            ]
             h.spin_until(
                 lambda: all(
-                    sub.get_publisher_count() > 0
-                    for sub in recorder._subscriptions
-                    if not sub.topic_name.endswith(('mantle_profile', 'cmd/command'))
+                    t in recorder.subscriptions
+                    and recorder.subscriptions[t].get_publisher_count() > 0
+                    for t in expected
                 ),
                 30.0,
                 'the recorder to match every topic',
@@ -90,7 +95,6 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
             assert h.wait_for_exit('sim_node', timeout_s=100) == 0, h.output()[-3000:]
             # sim_node exits once every reliable subscriber acknowledged its samples; take them
             # all: the final state on every state topic (not a fixed wait, which load can beat)
-            # /clock is best effort on the recorder's side: it may miss a sample, which is allowed
             state_topics = [f'/{t}' for t in names.STATE_TOPICS if t != names.TOPIC_CLOCK]
 
             def whole_recording() -> bool:

@@ -252,6 +252,11 @@ def test_recorder_class_in_process(tmp_path: Path, localhost_only: None) -> None
         )
         executor = rclpy.executors.SingleThreadedExecutor(context=context)
         executor.add_node(node)
+        # the recorder subscribes once it discovers the publisher (its timer, on this executor)
+        deadline = time.monotonic() + 10
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert set(recorder.subscriptions) == {'/pulsejet/thrust'}
         for i in range(5):
             pub.publish(messages.observation_messages(observation(i))[3][1])
         deadline = time.monotonic() + 10
@@ -292,3 +297,22 @@ def test_recorder_gets_applied_command_published_before_it_matched(
     assert proc.returncode == 0
     (recorded,) = read_all(out)['/' + topic]
     assert messages.command_from_applied(recorded) == (0.0, held)
+
+
+def test_subscription_qos_records_every_publisher_as_rosbag2_does() -> None:
+    from pulsejet_sim.ros.recorder import subscription_qos
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    def offered(reliability, durability=DurabilityPolicy.VOLATILE):
+        return QoSProfile(depth=10, reliability=reliability, durability=durability)
+
+    reliable, best_effort = ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFORT
+    latched = offered(reliable, DurabilityPolicy.TRANSIENT_LOCAL)
+    qos = subscription_qos([offered(reliable), offered(reliable)])
+    assert (qos.reliability, qos.durability) == (reliable, DurabilityPolicy.VOLATILE)
+    # one best-effort publisher (a bag player's /clock): a reliable subscription would miss it
+    assert subscription_qos([offered(reliable), offered(best_effort)]).reliability == best_effort
+    qos = subscription_qos([latched])
+    assert (qos.reliability, qos.durability) == (reliable, DurabilityPolicy.TRANSIENT_LOCAL)
+    # a volatile publisher beside a latched one: a transient-local subscription would miss it
+    assert subscription_qos([latched, offered(reliable)]).durability == DurabilityPolicy.VOLATILE

@@ -37,16 +37,21 @@ WRITER = textwrap.dedent("""
     from std_msgs.msg import Float64
     from rosgraph_msgs.msg import Clock
     from pulsejet_sim.bag.writer import BagWriter, qos_profiles_yaml
-    from pulsejet_sim.ros.recorder import subscription_qos
+    from pulsejet_sim.ros.messages import reliable_qos
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     path, mode, flush = sys.argv[1], sys.argv[2], float(sys.argv[3])
     # chunks close by age only
     bag = BagWriter(path, chunk_size_bytes=1 << 20, flush_period_s=flush)
     bag.add_metadata('pulsejet', {'scene': 'escape', 'note': 'killed on purpose'})
-    for topic, type_name in (
-        ('pulsejet/volume', 'std_msgs/msg/Float64'),
-        ('/clock', 'rosgraph_msgs/msg/Clock'),
-    ):
-        bag.add_topic(topic, type_name, qos_profiles_yaml([subscription_qos(topic)]))
+    bag.add_topic(
+        'pulsejet/volume', 'std_msgs/msg/Float64',
+        qos_profiles_yaml([reliable_qos('pulsejet/volume', 1000)]),
+    )
+    # a best-effort clock publisher (as a bag player's)
+    bag.add_topic(
+        '/clock', 'rosgraph_msgs/msg/Clock',
+        qos_profiles_yaml([QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)]),
+    )
     i = 0
     while True:
         # system-wide clock: the parent compares it with its kill time

@@ -97,7 +97,8 @@ def test_trained_routine_over_ros_matches_offline(stored, tmp_path, monkeypatch)
         recorder = Recorder(h.node, mcap, TOPICS)
         try:
             h.spin_until(
-                lambda: all(sub.get_publisher_count() > 0 for sub in recorder._subscriptions),
+                lambda: len(recorder.subscriptions) == len(TOPICS)
+                and all(sub.get_publisher_count() > 0 for sub in recorder.subscriptions.values()),
                 30.0,
                 'the recorder to match its topics',
             )

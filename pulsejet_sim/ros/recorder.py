@@ -34,18 +34,11 @@ from pulsejet_sim.ros.node_params import ParamSpec
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-# State and command topics: reliable and deep, so a burst from a fast simulation is not dropped
-# (transient local for interface.LATCHED_TOPICS, so the recorder gets what was published before
-# the publisher's writer matched it).
+# Deep, so a burst from a fast simulation is not dropped while the executor is busy.
 QOS_DEPTH = 1000
-# /clock: best effort matches both best-effort and reliable publishers (a reliable subscription
-# would not match a best-effort clock publisher).
-CLOCK_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1000,
-    reliability=ReliabilityPolicy.BEST_EFFORT,
-    durability=DurabilityPolicy.VOLATILE,
-)
+# a topic is subscribed once its publishers are discovered, with the QoS they offer (rosbag2's
+# rule): this often the recorder looks for publishers of the topics it has not subscribed yet
+DISCOVERY_PERIOD_S = 0.1
 STOP_POLL_S = 0.1  # a signal ends the recording within this time
 DRAIN_IDLE_SPINS = 5  # at shutdown, taking stops after this many spins that wrote nothing
 FLUSH_PERIOD_S = 1.0  # an idle recorder still pushes its last chunk to disk within this time
@@ -120,11 +113,27 @@ def import_message_class(type_name: str) -> type:
         ) from None
 
 
-def subscription_qos(resolved_topic: str) -> QoSProfile:
-    """Return the QoS the recorder subscribes `resolved_topic` with."""
-    if resolved_topic == '/clock':
-        return CLOCK_QOS
-    return messages.reliable_qos(resolved_topic, QOS_DEPTH)
+def subscription_qos(offered: Iterable[QoSProfile]) -> QoSProfile:
+    """
+    Return the QoS that records every publisher offering `offered` (rosbag2's rule).
+
+    Reliable only when every publisher is reliable (a reliable subscription ignores best-effort
+    publishers; a best-effort one loses samples under load, as /clock did), transient local only
+    when every publisher is (a latched topic's history then reaches the recorder).
+    """
+    offered = list(offered)
+    reliable = bool(offered) and all(
+        q.reliability == ReliabilityPolicy.RELIABLE for q in offered
+    )
+    latched = bool(offered) and all(
+        q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered
+    )
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=QOS_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )
 
 
 class Recorder:
@@ -132,8 +141,10 @@ class Recorder:
     Subscribe raw to `topics` on `node` and write every message to `path` until close().
 
     topics: entries as for parse_topics; None = every topic in messages.TOPIC_TYPES. Topic names
-    are resolved in the node's namespace and recorded fully qualified. A topic appears in the file
-    with its first message, carrying the QoS its publishers offered (as rosbag2 does).
+    are resolved in the node's namespace and recorded fully qualified. As rosbag2 does, a topic is
+    subscribed when its publishers are discovered, with the reliability and durability they all
+    offer (`subscription_qos`), and appears in the file with its first message, carrying the QoS
+    its publishers offered. The node's executor must spin (the discovery runs on a timer).
     """
 
     def __init__(self, node: Node, path: str | Path, topics: Sequence[str] | None = None) -> None:
@@ -141,17 +152,38 @@ class Recorder:
         wanted = parse_topics(topics if topics is not None else list(messages.TOPIC_TYPES))
         self.writer = BagWriter(path, flush_period_s=FLUSH_PERIOD_S)
         self.path = self.writer.path
-        self._subscriptions = []
-        for name, type_name in wanted.items():
-            resolved = node.resolve_topic_name(name)
-            qos = subscription_qos(resolved)
-            callback = self._make_callback(resolved, type_name)
-            self._subscriptions.append(
-                node.create_subscription(
-                    import_message_class(type_name), name, callback, qos, raw=True
+        self._wanted = {
+            node.resolve_topic_name(name): (import_message_class(type_name), type_name)
+            for name, type_name in wanted.items()
+        }
+        self._subscriptions: dict[str, object] = {}
+        self.subscribe_discovered()
+        self._timers = [
+            node.create_timer(FLUSH_PERIOD_S, self.writer.flush_if_due),
+            node.create_timer(DISCOVERY_PERIOD_S, self.subscribe_discovered),
+        ]
+
+    @property
+    def subscriptions(self) -> dict[str, object]:
+        """The subscriptions made so far, by resolved topic name."""
+        return dict(self._subscriptions)
+
+    def subscribe_discovered(self) -> None:
+        """Subscribe the wanted topics whose publishers are known by now."""
+        if self.writer.closed:
+            return
+        for topic, (cls, type_name) in self._wanted.items():
+            if topic in self._subscriptions:
+                continue
+            offered = [i.qos_profile for i in self.node.get_publishers_info_by_topic(topic)]
+            if offered:
+                self._subscriptions[topic] = self.node.create_subscription(
+                    cls,
+                    topic,
+                    self._make_callback(topic, type_name),
+                    subscription_qos(offered),
+                    raw=True,
                 )
-            )
-        self._timer = node.create_timer(FLUSH_PERIOD_S, self.writer.flush_if_due)
 
     def _make_callback(self, topic: str, type_name: str):
         def on_message(data: bytes) -> None:
@@ -185,12 +217,12 @@ class Recorder:
 
     def close(self) -> Path:
         """Stop recording and close the file (idempotent); returns its path."""
-        for sub in self._subscriptions:
+        for timer in self._timers:
+            self.node.destroy_timer(timer)
+        self._timers.clear()
+        for sub in self._subscriptions.values():
             self.node.destroy_subscription(sub)
         self._subscriptions.clear()
-        if self._timer is not None:
-            self.node.destroy_timer(self._timer)
-            self._timer = None
         self.writer.close()
         return self.path
 
