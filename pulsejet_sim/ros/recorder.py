@@ -165,7 +165,7 @@ class Recorder:
 
     @property
     def subscriptions(self) -> dict[str, object]:
-        """The subscriptions made so far, by resolved topic name."""
+        """Return the subscriptions made so far, by resolved topic name."""
         return dict(self._subscriptions)
 
     def subscribe_discovered(self) -> None:
