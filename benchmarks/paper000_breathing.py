@@ -39,7 +39,6 @@ DURATION_S = 1.5
 # runs may stop: their first swings still give the period)
 VISCOSITIES_PA_S = (500.0, 50.0, 0.0)
 REST_TOLERANCE = 1e-4  # of x0: closer to rest than this is rest (round-off, not a swing)
-REFINED = {'mesh': {'elements': 192}, 'simulation': {'dt_s': 2.5e-4}}
 
 
 def free_response(spec, viscosity_pa_s: float, refined: bool) -> dict:
@@ -53,7 +52,7 @@ def free_response(spec, viscosity_pa_s: float, refined: bool) -> dict:
         },
     )
     if refined:
-        overrides = merge(overrides, REFINED)
+        overrides = merge(overrides, study.REFINED)
     rest_overrides = merge(overrides, {'initial': {'radial_perturbation_m': 0.0}})
     rest_volume = Simulation(
         load_scene(spec.scene, rest_overrides, replace=spec.replace).model

@@ -56,10 +56,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import paper000_study as study  # noqa: E402
 from pulsejet_sim.sweep import load_sweep, merge, run_one, RunRow, RunSpec  # noqa: E402
 
-FINER = {
-    'mesh': {'elements': 384},
-    'simulation': {'dt_s': 1.25e-4},
-}  # for a run the refined one moves > 2 %
 MODULI = {'E20k': 20000.0, 'E40k': 40000.0, 'E80k': 80000.0}
 # Experiments A-F ran on the study's first version, whose routines were 30 % / 45 % half cosines
 # (config/sweeps/paper000_study.yaml, "pulse"; benchmarks/results/paper000_study/first_version/).
@@ -303,7 +299,7 @@ def section(key: str, exp: Experiment, specs: list[RunSpec], stored: list[dict])
         for i, (r, f) in enumerate(zip(rows, fine))
         if abs(r['peak_speed_m_s'] / f['peak_speed_m_s'] - 1.0) > study.CONVERGED
     ]
-    finer = dict(zip(loose, run_all([changed(cases[i], FINER) for i in loose])))
+    finer = dict(zip(loose, run_all([changed(cases[i], study.FINER) for i in loose])))
     wall = time.perf_counter() - start
     keep = {'external': 'internal', 'internal': 'external'}.get(exp.study, '')
     prefix = '' if exp.study == 'both' else exp.study

@@ -37,11 +37,6 @@ FREQUENCIES_HZ = (1.27, 1.89, 2.5, 3.5, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 12.0)
 CONTRACTION, RELEASE = 0.30, 0.45
 VISCOSITIES_PA_S = (500.0, 50.0)
 DURATION_S = 4.0
-REFINED = {'mesh': {'elements': 192}, 'simulation': {'dt_s': 2.5e-4}}
-# a run whose refined twin moved by more than CONVERGED is run again at FINER, to show which of
-# the two is converged
-FINER = {'mesh': {'elements': 384}, 'simulation': {'dt_s': 1.25e-4}}
-CONVERGED = 0.02
 
 
 def response(spec, frequency_hz: float, viscosity_pa_s: float, resolution: dict) -> dict:
@@ -93,13 +88,13 @@ def main() -> int:
     for viscosity in VISCOSITIES_PA_S:
         for f in FREQUENCIES_HZ:
             res = response(spec, f, viscosity, {})
-            fine = response(spec, f, viscosity, REFINED)
+            fine = response(spec, f, viscosity, study.REFINED)
             table[viscosity, f] = res, fine
             if not (res['fault'] or fine['fault']):
                 error = change(res, fine)
                 worst = max(worst, error)
-                if error > CONVERGED:
-                    finer[viscosity, f] = response(spec, f, viscosity, FINER), error
+                if error > study.CONVERGED:
+                    finer[viscosity, f] = response(spec, f, viscosity, study.FINER), error
             print(viscosity, f, res, fine, file=sys.stderr, flush=True)
     lines = []
     for viscosity in VISCOSITIES_PA_S:
@@ -146,7 +141,7 @@ def main() -> int:
         '|---:|---:|---|---:|---|---|---|\n' + '\n'.join(lines) + '\n\n'
         'Resolution: largest relative change of stroke or peak speed at 192 elements / '
         f'0.25 ms, over the runs that did not stop: {worst * 100:.2f} %. Runs that moved by more '
-        f'than {CONVERGED:.0%}, again at 384 elements, 0.125 ms:\n\n'
+        f'than {study.CONVERGED:.0%}, again at 384 elements, 0.125 ms:\n\n'
         + ('\n'.join(finer_lines) or '- none')
         + '\n'
     )

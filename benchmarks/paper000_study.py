@@ -45,6 +45,12 @@ REFINED = {
     'mesh': {'elements': 192},
     'simulation': {'dt_s': 2.5e-4},
 }  # twice the elements, half the step
+# a run whose refined twin moved by more than CONVERGED is run once more at FINER (the
+# experiments do), to show which of the two is converged
+FINER = {
+    'mesh': {'elements': 384},
+    'simulation': {'dt_s': 1.25e-4},
+}
 CONVERGED = 0.02  # a run's peak speed within 2 % of the refined run's
 SPREAD_ALMOST_NONE = 1.15  # "almost independent of the routine": fastest/slowest routine <= 1.15
 DOUBLES = 1.8  # "doubling": fastest/second-fastest routine >= 1.8
