@@ -14,11 +14,17 @@ from pulsejet_sim.sweep import load_sweep, run_one
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-spec = importlib.util.spec_from_file_location(
-    'paper000_study', ROOT / 'benchmarks' / 'paper000_study.py'
-)
-study = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(study)
+
+
+def load_benchmark(name):
+    """Import benchmarks/<name>.py (not a package) as a module."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / 'benchmarks' / f'{name}.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+study = load_benchmark('paper000_study')
 STORED = study.read_table(study.OUT / 'study.csv')
 REFINED = study.read_table(study.OUT / 'refined.csv')
 RERUN = ('internal/paper/cone/E80k/T0.66', 'external/consistent/ellipsoid/E80k/T0.53/falling')
@@ -77,13 +83,6 @@ def test_unresolved_runs_are_the_paper_couplings_closing_nozzles():
     assert all(r['peak_speed_m_s'] > 5.0 for r in closing)  # m/s: the runaway jet
     consistent = [r for r in STORED if r['coupling'] == 'consistent']
     assert max(r['peak_speed_m_s'] for r in consistent) < 0.5
-
-
-def load_benchmark(name):
-    spec = importlib.util.spec_from_file_location(name, ROOT / 'benchmarks' / f'{name}.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.mark.timeout(300)

@@ -22,6 +22,7 @@ import yaml
 rclpy = pytest.importorskip('rclpy')
 from pulsejet_ctrl.routines import PumpValveRoutine  # noqa: E402, I100
 from pulsejet_sim.optimize import routine_run  # noqa: E402
+from pulsejet_sim.resim import read_applied_commands  # noqa: E402
 from rosbags.highlevel import AnyReader  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent.parent / 'examples' / 'results'
@@ -138,11 +139,7 @@ def test_trained_routine_over_ros_matches_offline(stored, tmp_path, monkeypatch)
     routine = PumpValveRoutine.from_config(summary['trained_routine'])
     # each applied command holds from its stamp on: of several at one stamp (the scene's initial
     # command at t=0, then the controller's answer for t=0) the last one is the one stepped with
-    held = {}
-    for msg in bag['pulsejet/applied_command']:
-        held[msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9] = dict(
-            zip(msg.name, msg.position)
-        )
+    held = dict(read_applied_commands(mcap))
     assert len(held) >= 3
     for t, values in held.items():
         if t >= LIVE_S - 1e-9:
@@ -150,8 +147,8 @@ def test_trained_routine_over_ros_matches_offline(stored, tmp_path, monkeypatch)
         expected = PumpValveRoutine.from_config(summary['trained_routine'])
         for i in range(int(round(t / BATCH_S)) + 1):
             cmd = expected.command(i * BATCH_S)
-        assert values['pump_flow_m3_s'] == pytest.approx(cmd.pump_flow_m3_s), t
-        assert values['valve_opening'] == pytest.approx(cmd.valve_opening), t
+        assert values.pump_flow_m3_s == pytest.approx(cmd.pump_flow_m3_s), t
+        assert values.valve_opening == pytest.approx(cmd.valve_opening), t
     print(
         f'live {live:.6f} m, offline {offline["distance_m"]:.6f} m '
         f'({(live / offline["distance_m"] - 1) * 100:+.4f} %), {len(held)} applied commands'
