@@ -1,9 +1,9 @@
 """
 Numba kernels that advance N lumped robots in one call (the vector environment's engine).
 
-Same physics, same arithmetic: the right-hand side below is ``lumped_kernels.rhs`` written for a
-block of robots (the same expressions in the same order, specialised on the same literal term
-flags), and the step is ``lumped_kernels._advance``'s RK4 step (same stage sums, same valve stroke,
+Same physics, same arithmetic (``exact=True``): the right-hand side below is
+``lumped_kernels.rhs`` written for a block of robots (the same expressions in the same order,
+specialised on the same literal term flags), and the step is ``lumped_kernels._advance``'s RK4 step (same stage sums, same valve stroke,
 same bound checks ``_check``). Only the order of the loops differs: robots are innermost inside
 each RK stage, so that LLVM vectorises the stage over robots (AVX2: 4 robots per instruction).
 
@@ -22,10 +22,13 @@ block: ``exact=True`` calls ``math.atanh`` (libm), and the batch then equals N s
 bit for bit (tested); ``exact=False`` uses ``_atanh_fast``, fdlibm's log1p algorithm written
 branch-free (polynomial of Sun Microsystems' e_log/s_log1p, the exponent split by integer bit
 operations), which vectorises. Its error is at most 1.65 ulp on 3.5e6 inputs against an
-extended-precision reference (libm: the same; tested), like libm's own; the batch then differs from
-single-robot runs only by the rounding of atanh, a relative 1e-16 per evaluation that the (damped,
+extended-precision reference (libm: the same; tested), like libm's own. ``exact=False`` also
+compiles the step with the LLVM flags ``FAST_MATH`` (a shared reciprocal for divisions by the same
+value, fused multiply-adds), each a rounding difference of about an ulp. The batch then differs
+from single-robot runs only by rounding, a relative 1e-16 per operation that the (damped,
 non-chaotic) dynamics carry to below 1e-12 of each state component's scale over thousands of steps
-(tested at that tolerance).
+(tested at that tolerance). The two paths are two compiled copies of one Python body
+(``_advance_batch_exact`` and ``_advance_batch_fast``): fastmath is a per-function flag.
 
 Steps that the vector path does not take: a robot whose step needs RK4 stability sub-steps
 (``rate * dt > 1.5``: a throttled fast flow or a stiff light shell) or whose valve seals a moving
@@ -41,6 +44,7 @@ commands ``q_cmd`` and ``valve_cmd`` (N,).
 from __future__ import annotations
 
 import math
+import types as types_module
 
 from llvmlite import ir
 from numba import literally, njit, types
@@ -48,7 +52,13 @@ from numba.extending import intrinsic
 import numpy as np
 from pulsejet_sim.models import lumped_kernels as K
 
-BLOCK = 32  # robots per block (a multiple of the SIMD width; the block's rows stay in L1/L2)
+# LLVM flags of the default (exact=False) path: 'arcp' lets it multiply by one reciprocal where
+# rhs divides several values by the same one (v_b, a_n, the masses), 'contract' fuses a multiply
+# and an add, 'nsz' ignores the sign of zero. Each changes a result by at most about an ulp. Not
+# 'nnan'/'ninf' (the step's finiteness check must see nan and inf) nor 'reassoc'/'afn' (they
+# would undo fdlibm's compensated sums in _atanh_fast).
+FAST_MATH = {'arcp', 'contract', 'nsz'}
+BLOCK = 64  # robots per block (a multiple of the SIMD width; the block's rows stay in L1/L2)
 # a last block with fewer robots runs them one at a time (lumped_kernels._advance)
 SCALAR_BELOW = 16
 
@@ -433,6 +443,7 @@ def _stage(flags, W, stage, h, dt):
     """
     B = BLOCK
     half = 0.5 * h
+    n_slow = 0
     for j in range(B):
         (
             d0,
@@ -458,6 +469,7 @@ def _stage(flags, W, stage, h, dt):
             rate = spring_rate if spring_rate > damping_rate else damping_rate  # numba's max()
             slow = rate * dt > 1.5 or W[R_SEAL * B + j] > 0.0
             W[R_SLOW * B + j] = 1.0 if slow else 0.0
+            n_slow += 1 if (slow and W[R_ACTIVE * B + j] > 0.0) else 0
         _acc(W, j, 0, stage, d0)
         _acc(W, j, 1, stage, d1)
         _acc(W, j, 2, stage, d2)
@@ -478,6 +490,7 @@ def _stage(flags, W, stage, h, dt):
         _next(W, j, R_TB, K.Y_B, stage, half, h, d2)
         _next(W, j, R_TW, K.Y_W, stage, half, h, d3)
         _next(W, j, R_TQ, K.Y_QP, stage, half, h, d4)
+    return n_slow
 
 
 @njit(cache=True, error_model='numpy')
@@ -620,15 +633,6 @@ def _stage_state(W):
         W[R_SEAL * B + j] = 1.0 if seal else 0.0
 
 
-@njit(cache=True, error_model='numpy')
-def _n_slow(W):
-    B = BLOCK
-    n = 0
-    for j in range(B):
-        n += 1 if (W[R_SLOW * B + j] > 0.0 and W[R_ACTIVE * B + j] > 0.0) else 0
-    return n
-
-
 @njit(cache=True)
 def _slow_steps(flags, W, P, start, n, dt, row):
     """
@@ -653,7 +657,6 @@ def _slow_steps(flags, W, P, start, n, dt, row):
             W[R_ACTIVE * B + j] = 0.0
 
 
-@njit(cache=True, error_model='numpy')
 def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exact):
     n = Y.shape[0]
     B = BLOCK
@@ -685,7 +688,7 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
             if spheroid:
                 _spheroid(flags, W)
                 _atanh_pass(W, exact)
-            _stage(flags, W, 0, h, dt)
+            n_slow = _stage(flags, W, 0, h, dt)
             if spheroid:
                 _spheroid(flags, W)
                 _atanh_pass(W, exact)
@@ -700,7 +703,7 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
             _stage(flags, W, 3, h, dt)
             # robots needing sub-steps or sealing: the single-robot step (their vector step is
             # discarded)
-            if _n_slow(W) > 0:
+            if n_slow > 0:
                 _slow_steps(flags, W, P, start, n, dt, row)
             n_active = _finish(W, h)
         for j in range(B):
@@ -713,37 +716,61 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
             status[i] = int(W[R_STATUS * B + j])
 
 
-@njit(cache=True)
-def advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exact):
+def _compiled_copy(func, name: str, **options):
     """
-    Advance every robot i with status[i] == OK by n_steps fixed steps of dt.
+    Return func compiled by numba under its own name, with these options.
+
+    numba's on-disk cache files a function under its qualified name and line, not its compile
+    options: two options of one Python function would share (and overwrite) one cache entry, so
+    each copy gets a name of its own.
+    """
+    copy = types_module.FunctionType(
+        func.__code__, func.__globals__, name, func.__defaults__, func.__closure__
+    )
+    copy.__qualname__ = name
+    copy.__doc__ = func.__doc__
+    return njit(cache=True, error_model='numpy', **options)(copy)
+
+
+# advance_batch_exact and advance_batch_fast: one Python body, compiled with and without FAST_MATH
+_advance_batch_exact = _compiled_copy(_advance_batch, '_advance_batch_exact')
+_advance_batch_fast = _compiled_copy(_advance_batch, '_advance_batch_fast', fastmath=FAST_MATH)
+
+
+@njit(cache=True)
+def advance_batch_exact(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status):
+    """
+    Advance every robot i with status[i] == OK by n_steps fixed steps of dt, exactly.
 
     Each robot holds (q_cmd[i], valve_cmd[i]); done[i]: steps it made, status[i]:
-    lumped_kernels.OK or ERR_*. exact: libm's atanh (bit for bit the single-robot runs) instead of
-    the vectorised one.
+    lumped_kernels.OK or ERR_*. The single-robot arithmetic and libm's atanh: bit for bit the
+    single-robot runs.
     """
-    _advance_batch(literally(flags), Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exact)
+    _advance_batch_exact(literally(flags), Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, True)
 
 
-def batch_kernel(flags: int, n_state: int = K.NY):
-    """
-    Return the compiled entry point of advance_batch for this term set.
+@njit(cache=True)
+def advance_batch_fast(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status):
+    """advance_batch_exact with the vectorised atanh and FAST_MATH (the default)."""
+    _advance_batch_fast(literally(flags), Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, False)
 
-    Compiles or loads it once. Called as
-    kernel(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exact).
+
+def batch_kernel(flags: int, exact: bool = False, n_state: int = K.NY):
     """
-    Y = np.zeros((1, n_state))
-    P = np.zeros((1, K.NP))
+    Return the compiled entry point of advance_batch_exact or advance_batch_fast for this term set.
+
+    Compiles or loads only that path, once. Called as
+    kernel(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status).
+    """
     return K.specialised(
-        advance_batch,
+        advance_batch_exact if exact else advance_batch_fast,
         flags,
-        Y,
-        P,
+        np.zeros((1, n_state)),
+        np.zeros((1, K.NP)),
         np.zeros(1),
         np.zeros(1),
         0,
         1e-4,
         np.zeros(1, np.int64),
         np.zeros(1, np.int64),
-        True,
     )
