@@ -116,22 +116,32 @@ def test_the_study_wall_cannot_resonate_at_the_routines_frequencies():
     assert 1.0 / light['period_s'] > 3 * 1.89
 
 
-def test_the_cones_routine_spread_is_its_stroke_rate():
+@pytest.mark.timeout(300)
+def test_the_cones_routine_spread_is_a_lagging_walls_stroke_rate():
     """
-    Finding 5 (the cone almost independent of the routine) fails because the cone is quasi-static.
+    Finding 5 (the cone almost independent of the routine) fails: its wall lags its muscle little.
 
-    Experiment G (docs/PHYSICS_SHELL.md), from the stored study: every internal cone expels nearly
-    the same stroke at every routine (the routines differ only in period), so its peak speed
-    follows the stroke rate, 1/period: the fastest routine is the shortest, and the spread is the
-    period ratio 0.79 / 0.53 times factors near 1. "Almost independent" would need a stroke that
-    shrinks by a quarter from the slowest routine to the fastest.
+    Experiment G (docs/PHYSICS_SHELL.md): one internal cone reruns to its stored row
+    (routines.csv) bit for bit; on the stored rows, every internal cone's stroke over the last
+    period shrinks from the slowest routine to the fastest by the ratio of a first-order lag of
+    3 eta / E (within 0.02), its peak speed spreads by more than 1.4 (the routine's rate 1.49
+    times that ratio and a rest of 1.1-1.15), and every peak falls in the run's last period.
     """
     routines = load_benchmark('paper000_routines')
-    cones = [s for s in routines.spreads(STORED) if s['mantle'] == 'cone']
+    cycles = routines.read_cycles()
+    _, runs = load_sweep(study.SWEEP)
+    name = 'internal/paper/cone/E20k/T0.53'
+    rerun = routines.cycle_strokes(next(r for r in runs if r.name == name))
+    stored = next(c for c in cycles if c['run'] == name)
+    for column in routines.CYCLE_COLUMNS:
+        assert repr(rerun[column]) == repr(stored[column]), column
+    cones = [s for s in routines.spreads(STORED, cycles) if s['mantle'] == 'cone']
     assert len(cones) == 6  # 2 couplings x 3 stiffnesses
     for s in cones:
         assert (s['fast'], s['slow']) == ('T0.53', 'T0.79')
         assert s['period_ratio'] == pytest.approx(0.79 / 0.53)
-        assert 0.93 < s['stroke_ratio'] <= 1.0  # the same stroke within 7 %
-        assert 1.0 < s['rest'] < 1.12
+        assert s['cycle_stroke_ratio'] == pytest.approx(s['lag_ratio'], abs=0.02)
+        assert s['cycle_stroke_ratio'] > 0.84  # far above the 0.68 "almost independent" needs
+        assert 1.1 < s['rest'] < 1.15
         assert s['speed_ratio'] > 1.4 > study.SPREAD_ALMOST_NONE
+        assert min(s['peak_times_s']) > 4.0 - 0.79  # in the last period of the slowest routine
