@@ -160,6 +160,13 @@ def soak(
     finally:
         exit_codes = {name: p.stop() for name, p in reversed(list(procs.items()))}
         client.close()
+    # sim_node logs each trip and clearance with the simulated time and the command's age: the
+    # evidence of what a trip was (the 1 Hz diagnostics only say that one happened)
+    watchdog_log = [
+        line.strip()
+        for line in procs['sim_node'].output().splitlines()
+        if 'command watchdog' in line
+    ]
     measured0 = start + warm_up_s
     clock = client.watch.diagnostics_clock if record else client.watch.clock_wall
     minute_rtf = [
@@ -204,6 +211,7 @@ def soak(
         'clock_source': 'recorder' if record else 'monitor',
         'period_jitter_p99_ms': percentile([abs(p - nominal) for p in periods], 99) * 1e3,
         'watchdog_trips': trips,
+        'watchdog_log': watchdog_log,
         'dropped_wall_s': last.get('dropped_wall_s', '?'),
         'commands': {k: last.get(f'commands_{k}', '?') for k in ('accepted', 'rejected', 'stale')},
         'faults': last.get('fault', '?') or 'none',
@@ -289,6 +297,10 @@ def table(r: dict) -> str:
             '{accepted} / {rejected} / {stale}'.format(**r['commands']),
         ),
         ('watchdog trips (must be 0)', str(r['watchdog_trips'])),
+        (
+            "sim_node's watchdog log (trips and clearances)",
+            '<br>'.join(r.get('watchdog_log', [])) or 'none',
+        ),
         ('physics fault; ERROR diagnostics', f"{r['faults']}; {r['error_diagnostics']}"),
         (
             'parameter dump rounds (list + get): p50 / p99 / max; slower than 10 s',
