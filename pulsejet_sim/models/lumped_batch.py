@@ -3,9 +3,10 @@ Numba kernels that advance N lumped robots in one call (the vector environment's
 
 Same physics, same arithmetic (``exact=True``): the right-hand side below is
 ``lumped_kernels.rhs`` written for a block of robots (the same expressions in the same order,
-specialised on the same literal term flags), and the step is ``lumped_kernels._advance``'s RK4 step (same stage sums, same valve stroke,
-same bound checks ``_check``). Only the order of the loops differs: robots are innermost inside
-each RK stage, so that LLVM vectorises the stage over robots (AVX2: 4 robots per instruction).
+specialised on the same literal term flags), and the step is ``lumped_kernels._advance``'s RK4
+step (same stage sums, same valve stroke, same bound checks ``_check``). Only the order of the
+loops differs: robots are innermost inside each RK stage, so that LLVM vectorises the stage over
+robots (AVX2: 4 robots per instruction).
 
 Layout, as seen by LLVM: the robots are cut into blocks of ``BLOCK`` robots (the last block padded
 with copies of a real robot, never written back); a block's states, RK stage values, stage sums and
