@@ -28,7 +28,7 @@ import sys
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench_common import header  # noqa: E402
+from bench_common import header, write  # noqa: E402
 import paper000_study as study  # noqa: E402
 from pulsejet_sim.scene import load_scene  # noqa: E402
 from pulsejet_sim.simulation import Simulation  # noqa: E402
@@ -248,10 +248,7 @@ def main() -> int:
         + '\n'.join(lag_lines)
         + '\n'
     )
-    path = study.OUT / 'routines.md'
-    path.write_text(text)
-    print(text)
-    print(f'written to {path}')
+    write('paper000_study/routines', text)
     return 0
 
 
