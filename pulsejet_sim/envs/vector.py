@@ -10,7 +10,7 @@ one scene's parameters (``params`` may give one row per robot instead, shape
 (N, lumped_kernels.NP)). ``exact``: False (default) uses the vectorised atanh of Lamb's added mass
 and LLVM's reciprocal and fused multiply-add rewrites (each about an ulp; trajectories agree with
 LumpedPumpValveEnv to 1e-12 of each component's scale), True libm's (bit for bit
-LumpedPumpValveEnv, about 25 % fewer robot-steps/s).
+LumpedPumpValveEnv, 25-45 % fewer robot-steps/s).
 Autoreset: gymnasium's ``NEXT_STEP`` mode: the step after a robot's episode ended resets that robot
 (its action is ignored, reward 0); ``info['fault']`` holds the robots' fault codes
 (lumped_kernels.ERR_*, 0: none). Only the fixed-step RK4 integrator (the scene's ``dt_s``) runs in
