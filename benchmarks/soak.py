@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 import sys
 import tempfile
@@ -91,6 +92,7 @@ def soak(
     tmp: Path,
     controller: str = 'routine',
     warm_up_s: float = 60.0,
+    param_period_s: float = 1.0,
 ) -> dict:
     env = node_env(domain)
     procs = {
@@ -128,7 +130,7 @@ def soak(
         domain, 'soak_monitor', keep_clock=not record, state_topics=False, clock=not record
     )
     realtime_minus_monotonic = time.time() - time.monotonic()
-    probe = ParamProbe(client.node)
+    probe = ParamProbe(client.node, period_s=param_period_s) if param_period_s > 0 else None
     rss = {name: [] for name in procs}
     try:
         client.spin_until(
@@ -143,7 +145,8 @@ def soak(
         next_rss = start
         while time.monotonic() < end:
             client.executor.spin_once(timeout_sec=0.005)
-            probe.poll()
+            if probe is not None:
+                probe.poll()
             now = time.monotonic()
             if now >= next_rss:
                 for name, p in procs.items():
@@ -219,7 +222,12 @@ def soak(
         'rss': growth,
         'cpu': cpu,
         'exit_codes': exit_codes,
-        'param_services': probe.summary(),
+        'param_services': (
+            probe.summary()
+            if probe is not None
+            else {'rounds': 0, 'p50_ms': math.nan, 'p99_ms': math.nan, 'max_ms': math.nan,
+                  'starved': 0}
+        ),
     }
     if record:
         result['recording'] = read_back(bag)
@@ -354,6 +362,12 @@ def main(argv=None) -> int:
     ap.add_argument(
         '--record', action='store_true', help='also run the recorder and read its file back'
     )
+    ap.add_argument(
+        '--param-period-s',
+        type=float,
+        default=1.0,
+        help='wall seconds between parameter dump rounds (0: no dumps; default 1)',
+    )
     ap.add_argument('--no-write', action='store_true', help='print only')
     args = ap.parse_args(argv)
     if not args.minutes >= 1:
@@ -368,6 +382,7 @@ def main(argv=None) -> int:
             Path(tmp),
             args.controller,
             args.warm_up_s,
+            args.param_period_s,
         )
     command = 'python benchmarks/soak.py ' + ' '.join(sys.argv[1:] if argv is None else argv)
     misses = verdicts(r)

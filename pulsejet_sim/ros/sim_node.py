@@ -260,11 +260,13 @@ class SimNode(Node):
 
     # -- diagnostics ----------------------------------------------------------------------------
     def _publish_diagnostics(self):
+        # only the snapshot holds the pacing thread; building and publishing the message does not
+        # need the session
         with self.loop.locked():
             level, message, values = self.session.health(time.monotonic())
-            self.out.diagnostics(
-                level, self.status_name, self.get_fully_qualified_name(), message, values
-            )
+        self.out.diagnostics(
+            level, self.status_name, self.get_fully_qualified_name(), message, values
+        )
 
 
 def main(args=None):
