@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import math
 from pathlib import Path
 import sys
@@ -130,6 +131,7 @@ def cycle_strokes(spec, resolution: dict | None = None) -> dict:
     }
 
 
+@functools.lru_cache(maxsize=None)  # the cases share three lags and three periods
 def lag_strokes(period_s: float, lag_s: float, cycles: int = 14, steps: int = 4000):
     """
     Return (whole-run, last-period) strokes of a first-order lag x' = (u - x) / lag_s from x = 0.

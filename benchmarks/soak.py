@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 import sys
 import tempfile
@@ -130,7 +129,8 @@ def soak(
         domain, 'soak_monitor', keep_clock=not record, state_topics=False, clock=not record
     )
     realtime_minus_monotonic = time.time() - time.monotonic()
-    probe = ParamProbe(client.node, period_s=param_period_s) if param_period_s > 0 else None
+    # with param_period_s 0 the probe is never polled: no dumps, and its summary counts 0 rounds
+    probe = ParamProbe(client.node, period_s=param_period_s)
     rss = {name: [] for name in procs}
     try:
         client.spin_until(
@@ -145,7 +145,7 @@ def soak(
         next_rss = start
         while time.monotonic() < end:
             client.executor.spin_once(timeout_sec=0.005)
-            if probe is not None:
+            if param_period_s > 0:
                 probe.poll()
             now = time.monotonic()
             if now >= next_rss:
@@ -222,12 +222,7 @@ def soak(
         'rss': growth,
         'cpu': cpu,
         'exit_codes': exit_codes,
-        'param_services': (
-            probe.summary()
-            if probe is not None
-            else {'rounds': 0, 'p50_ms': math.nan, 'p99_ms': math.nan, 'max_ms': math.nan,
-                  'starved': 0}
-        ),
+        'param_services': probe.summary(),
     }
     if record:
         result['recording'] = read_back(bag)
