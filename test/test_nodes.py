@@ -328,10 +328,14 @@ def test_blow_up_stops_stepping_without_nan(tmp_path):
         parameters={
             'real_time_factor': 2.0,
             'publish_rate_hz': 50.0,
+            # paused until the harness is matched: discovery on a loaded machine can take
+            # longer than the 1.5 s of wall time this scene needs to blow up
+            'start_paused': True,
             'scene_overrides': {'options': {'coupling': 'paper'}},
         },
         log_dir=tmp_path,
     ) as h:
+        h.resume()
         h.wait_for(lambda s: s.time_s >= 0.1, 60.0)
         h.spin_until(lambda: 'physics blew up' in h.output(), 30.0, 'the physics to blow up')
         h.spin(0.5)
@@ -370,10 +374,14 @@ def test_blow_up_with_duration_exits_non_zero(tmp_path):
         parameters={
             'real_time_factor': 2.0,
             'duration_s': 60.0,
+            # paused until the harness is matched: discovery on a loaded machine can take
+            # longer than the 1.5 s of wall time this scene needs to blow up
+            'start_paused': True,
             'scene_overrides': {'options': {'coupling': 'paper'}},
         },
         log_dir=tmp_path,
     ) as h:
+        h.resume()
         h.wait_for(lambda s: s.time_s >= 0.1, 60.0)
         assert h.wait_for_exit('sim_node', timeout_s=30.0) == 1, h.output()[-3000:]
         assert 'physics blew up' in h.output()

@@ -55,6 +55,15 @@ def test_a_late_tick_drops_wall_time_visibly_instead_of_silently():
     assert values['dropped_wall_s'] == pytest.approx(s.dropped_s())
 
 
+def test_a_late_first_tick_says_no_step_was_computed_instead_of_nan():
+    s = make()
+    s.start(0.0)
+    events = s.tick(1.0)  # late before any step: there is no physics cost to quote yet
+    warnings = [e.text for e in events if isinstance(e, eng.Log) and e.level == 'warning']
+    assert warnings and 'no step computed yet' in warnings[0], warnings
+    assert 'nan' not in warnings[0], warnings[0]
+
+
 def test_closed_loop_waits_for_each_answer_and_is_deterministic():
     def run(answer_delays):
         s = make('closed_loop', control_period_s=0.05)

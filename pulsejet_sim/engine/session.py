@@ -351,7 +351,7 @@ class Session:
                     'warning',
                     f'fell behind real time (factor {self.config.real_time_factor:g}): '
                     f'{self.dropped_s():.3f} s of wall time dropped so far, not caught up; '
-                    f'the physics alone runs at {self.physics_cost_rtf():.3g}x real time',
+                    f'{self._physics_cost_phrase()}',
                 )
             )
         if due > 0:
@@ -379,6 +379,13 @@ class Session:
             if self.physics_s_total > 0
             else float('nan')
         )
+
+    def _physics_cost_phrase(self) -> str:
+        # before the first step there is no cost to report: say so rather than print 'nan'
+        physics = self.physics_cost_rtf()
+        if not math.isfinite(physics):
+            return 'no step computed yet, so the node was not scheduled in time'
+        return f'the physics alone runs at {physics:.3g}x real time'
 
     # -- stepping -------------------------------------------------------------------------------
     def _run_periods(self, periods: int) -> bool:
@@ -805,8 +812,7 @@ class Session:
             cause = (
                 'the physics cannot keep up'
                 if math.isfinite(physics) and physics < cfg.real_time_factor
-                else f'the machine did not schedule the node in time (the physics alone runs at '
-                f'{physics:.3g}x real time)'
+                else f'the machine did not schedule the node in time ({self._physics_cost_phrase()})'
             )
             warn.append(
                 f'real-time factor {achieved:.3g} below the requested {cfg.real_time_factor:g}: '
