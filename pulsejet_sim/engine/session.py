@@ -812,7 +812,8 @@ class Session:
             cause = (
                 'the physics cannot keep up'
                 if math.isfinite(physics) and physics < cfg.real_time_factor
-                else f'the machine did not schedule the node in time ({self._physics_cost_phrase()})'
+                else 'the machine did not schedule the node in time '
+                f'({self._physics_cost_phrase()})'
             )
             warn.append(
                 f'real-time factor {achieved:.3g} below the requested {cfg.real_time_factor:g}: '
