@@ -127,8 +127,8 @@ class ClockWatch:
     """
 
     def __init__(self, domain: int):
+        from pulsejet_sim.ros.executor import make_executor
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
 
@@ -147,7 +147,7 @@ class ClockWatch:
             self._on_clock,
             QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT),
         )
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = make_executor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
         self.thread = threading.Thread(target=self._spin, daemon=True)

@@ -45,10 +45,10 @@ def run_rate(
     rate_hz: float, seconds: float, rtf: float, scene: str, domain: int, log_dir: Path
 ) -> dict:
     from diagnostic_msgs.msg import DiagnosticArray
+    from pulsejet_sim.ros.executor import make_executor
     from pulsejet_sim.ros.harness import NodeProcess
     from pulsejet_sim.ros.messages import command_from_applied
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
@@ -81,7 +81,7 @@ def run_rate(
         signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
     )
     node = rclpy.create_node('bench_hil_controller', context=context)
-    executor = SingleThreadedExecutor(context=context)
+    executor = make_executor(context=context)
     executor.add_node(node)
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 

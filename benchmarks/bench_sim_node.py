@@ -56,9 +56,9 @@ def run(
     controller: bool,
     lookahead_s: float = 0.0,
 ) -> dict:
+    from pulsejet_sim.ros.executor import make_executor
     from pulsejet_sim.scene import load_scene
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
 
@@ -90,7 +90,7 @@ def run(
         signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
     )
     node = rclpy.create_node('bench_sim_node', context=context)
-    executor = SingleThreadedExecutor(context=context)
+    executor = make_executor(context=context)
     executor.add_node(node)
     recv, stamps = [], []
 

@@ -100,8 +100,8 @@ class LiveClient:
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import TwistStamped, WrenchStamped
         from nav_msgs.msg import Odometry
+        from pulsejet_sim.ros.executor import make_executor
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64
@@ -113,7 +113,7 @@ class LiveClient:
             signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
         )
         self.node = rclpy.create_node(name, context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = make_executor(context=self.context)
         self.executor.add_node(self.node)
         self.watch = StateWatch()
         self.keep_clock = keep_clock

@@ -3,7 +3,8 @@ Soak: sim_node publishing at 1 kHz in real time with a closed-loop controller, f
 
     .venv/bin/python benchmarks/soak.py [--minutes 10] [--rate-hz 1000] [--scene pump_cycle]
                                         [--controller routine|every_state] [--warm-up-s 60]
-                                        [--record] [--no-write]
+                                        [--record] [--param-period-s 1]
+                                        [--keep-dir DIR] [--no-write]
 
 sim_node (real_time pacing, command watchdog on: 0.1 s of simulated time, safe action) and
 controller_node run as processes in an isolated ROS domain with localhost discovery. The
@@ -32,8 +33,10 @@ Not a test.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 from pathlib import Path
+import re
 import sys
 import tempfile
 import time
@@ -66,7 +69,10 @@ RECORDED_TOPICS = [
     interface.TOPIC_CLOCK,
     interface.TOPIC_APPLIED_COMMAND,
     f'{interface.TOPIC_DIAGNOSTICS}:diagnostic_msgs/msg/DiagnosticArray',
+    *interface.COMMAND_TOPICS,  # the controller's commands: their send times locate a stall
 ]
+TRIP_LINE = re.compile(r'\[WARN\] \[(\d+\.\d+)\] \[sim_node\]: command watchdog tripped')
+TRIP_WINDOW_S = 0.5  # gaps are looked for in this much wall time before a trip is logged
 
 
 def rtf_over(clock: list, t0_wall: float, t1_wall: float) -> float:
@@ -226,7 +232,64 @@ def soak(
     }
     if record:
         result['recording'] = read_back(bag)
+        result['trip_evidence'] = trip_evidence(bag, watchdog_log)
     return result
+
+
+def trip_evidence(path: Path, watchdog_log: list[str]) -> list[dict]:
+    """
+    Say, per trip, which process stalled: the longest gaps before it in send and receive times.
+
+    For the controller's commands and for sim_node's /clock: the longest gap between consecutive
+    send times (MCAP publish_time, the publisher's middleware time) and receive times (log_time,
+    at the recorder) in the TRIP_WINDOW_S of wall time before sim_node logged the trip. A trip
+    with no command-send gap near the 0.1 s timeout means the controller published on time and
+    sim_node did not take the commands; a command-send gap means the controller did not publish.
+    Read with the mcap library (an independent reader; rosbags does not expose publish_time).
+    """
+    from mcap.reader import make_reader
+
+    trips = [float(m.group(1)) for line in watchdog_log if (m := TRIP_LINE.search(line))]
+    if not trips:
+        return []
+    commands = {'/' + t for t in interface.COMMAND_TOPICS}
+    times = {'command': ([], []), 'clock': ([], [])}  # (send, receive) in s, system clock
+    try:
+        with open(path, 'rb') as fh:
+            for _, channel, record in make_reader(fh).iter_messages(log_time_order=False):
+                key = (
+                    'command'
+                    if channel.topic in commands
+                    else 'clock' if channel.topic == interface.TOPIC_CLOCK else None
+                )
+                if key is not None:
+                    times[key][0].append(record.publish_time * 1e-9)
+                    times[key][1].append(record.log_time * 1e-9)
+    except Exception as exc:  # read_back names the failure in the table
+        return [{'error': f'{type(exc).__name__}: {exc}'}]
+    for send, receive in times.values():
+        if send == receive:  # a recorder without send times (the events executor): say so
+            send[:] = []
+        send.sort()
+        receive.sort()
+
+    def longest_gap(series: list[float], end: float) -> float:
+        inside = [t for t in series if end - TRIP_WINDOW_S <= t <= end]
+        before = [t for t in series if t < end - TRIP_WINDOW_S][-1:]
+        points = before + inside + [end]  # the gap still open when the trip was logged counts
+        return max((b - a for a, b in zip(points, points[1:])), default=float('nan'))
+
+    return [
+        {
+            'wall_s': t,
+            **{
+                f'{key}_{kind}_gap_ms': longest_gap(series, t) * 1e3
+                for key, pair in times.items()
+                for kind, series in zip(('send', 'receive'), pair)
+            },
+        }
+        for t in trips
+    ]
 
 
 def clock_receive_times_ns(path: Path) -> list[int]:
@@ -332,7 +395,25 @@ def table(r: dict) -> str:
                 + ', '.join(f'{t} {n}' for t, n in sorted(rec['messages'].items())),
             )
         )
-    return '| metric | value |\n|---|---|\n' + ''.join(f'| {a} | {b} |\n' for a, b in rows)
+    text = '| metric | value |\n|---|---|\n' + ''.join(f'| {a} | {b} |\n' for a, b in rows)
+    evidence = r.get('trip_evidence') or []
+    if evidence and 'error' not in evidence[0]:
+        text += (
+            '\nWhere each trip came from: the longest gap in the '
+            f'{TRIP_WINDOW_S:g} s of wall time before it, in send times (the publisher) and '
+            'receive times (the recorder), ms. A '
+            'command-send gap near 100 ms: the controller did not publish; none: sim_node did '
+            'not take what was published.\n\n'
+            '| trip logged (s of the wall clock) | command send | command receive | /clock send '
+            '| /clock receive |\n|---|---|---|---|---|\n'
+        )
+        text += ''.join(
+            f"| {e['wall_s']:.3f} | {e['command_send_gap_ms']:.1f} | "
+            f"{e['command_receive_gap_ms']:.1f} | {e['clock_send_gap_ms']:.1f} | "
+            f"{e['clock_receive_gap_ms']:.1f} |\n"
+            for e in evidence
+        )
+    return text
 
 
 def main(argv=None) -> int:
@@ -363,11 +444,22 @@ def main(argv=None) -> int:
         default=1.0,
         help='wall seconds between parameter dump rounds (0: no dumps; default 1)',
     )
+    ap.add_argument(
+        '--keep-dir',
+        type=Path,
+        help='keep the logs and the recording in this directory (default: a temporary one)',
+    )
     ap.add_argument('--no-write', action='store_true', help='print only')
     args = ap.parse_args(argv)
     if not args.minutes >= 1:
         ap.error(f'--minutes {args.minutes}: must be >= 1')
-    with tempfile.TemporaryDirectory(prefix='pulsejet_soak_') as tmp:
+    if args.keep_dir is not None:
+        args.keep_dir.mkdir(parents=True, exist_ok=True)
+    with (
+        contextlib.nullcontext(str(args.keep_dir))
+        if args.keep_dir is not None
+        else tempfile.TemporaryDirectory(prefix='pulsejet_soak_')
+    ) as tmp:
         r = soak(
             args.minutes,
             args.rate_hz,

@@ -348,7 +348,9 @@ class ControllerNode(Node):
 def main(args=None):
     from pulsejet_sim.ros.node_main import run_node
 
-    return run_node('controller_node', ControllerNode, args)
+    # its command timer runs on simulated time, which the events executor does not keep
+    # (pulsejet_sim.ros.executor)
+    return run_node('controller_node', ControllerNode, args, executor_kind='single')
 
 
 if __name__ == '__main__':

@@ -135,3 +135,49 @@ def test_close_stops_a_real_time_loop_that_has_published():
 def test_a_period_that_is_not_positive_is_refused():
     with pytest.raises(ValueError, match=r'period_s=0\.0 rejected; allowed: > 0 s'):
         LiveLoop(session('real_time'), 0.0, print, print, print)
+
+
+@pytest.mark.timeout(120)
+def test_a_thread_waiting_for_the_session_gets_it_while_the_loop_runs_behind():
+    """
+    A loop behind real time (it never sleeps) still lets a waiting thread in before its next tick.
+
+    sim_node's executor takes the session (diagnostics, services, parameters) through locked();
+    while the pacing thread catches up it re-took the lock at once, the executor waited, and the
+    commands it should have been taking from DDS meanwhile tripped the watchdog (the soak's trips,
+    one per diagnostics second). Here the tick holds the GIL the way a publication does and the
+    loop's clock is always a period ahead, so the loop never waits.
+    """
+    ticks_while_waiting = [0]  # ticks begun while a thread was registered in locked()
+
+    def busy_tick(now):
+        if loop._waiting:
+            ticks_while_waiting[0] += 1
+        end = time.perf_counter() + 2e-4
+        while time.perf_counter() < end:  # Python work: holds the GIL, like building messages
+            pass
+        return []
+
+    fake_now = [0.0]
+
+    def always_behind():
+        fake_now[0] += 0.02  # two periods per reading: the next tick is always due
+        return fake_now[0]
+
+    loop = LiveLoop(
+        session('real_time'), 0.01, lambda events: None, pytest.fail, pytest.fail, busy_tick
+    )
+    loop.clock = always_behind
+    loop.start()
+    try:
+        waited = []
+        for _ in range(50):
+            ticks_while_waiting[0] = 0
+            with loop.locked():
+                waited.append(ticks_while_waiting[0])
+            time.sleep(0.002)
+    finally:
+        loop.close()
+    # none begins while a thread waits (one may, if the waiting thread is not scheduled within
+    # HANDOFF_TIMEOUT_S on a loaded machine); a plain lock let 45 to 327 ticks pass here
+    assert max(waited) <= 2, waited

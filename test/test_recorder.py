@@ -246,7 +246,8 @@ def test_recorder_class_in_process(tmp_path: Path, localhost_only: None) -> None
     )
     try:
         node = Node('recorder_in_process', context=context)
-        recorder = Recorder(node, tmp_path / 'in.mcap', ['pulsejet/thrust'])
+        # send times need the message info, which this single-threaded executor passes
+        recorder = Recorder(node, tmp_path / 'in.mcap', ['pulsejet/thrust'], send_times=True)
         pub = node.create_publisher(
             messages.message_class('pulsejet/thrust'), 'pulsejet/thrust', 10
         )
@@ -257,8 +258,12 @@ def test_recorder_class_in_process(tmp_path: Path, localhost_only: None) -> None
         while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         assert set(recorder.subscriptions) == {'/pulsejet/thrust'}
+        sent_between = []  # (before, after) each publish, system clock ns
         for i in range(5):
+            before = time.time_ns()
             pub.publish(messages.observation_messages(observation(i))[3][1])
+            sent_between.append((before, time.time_ns()))
+            time.sleep(0.01)  # apart, so each send time falls in its own window only
         deadline = time.monotonic() + 10
         while (
             recorder.message_counts.get('/pulsejet/thrust', 0) < 5 and time.monotonic() < deadline
@@ -272,6 +277,16 @@ def test_recorder_class_in_process(tmp_path: Path, localhost_only: None) -> None
     assert [m.wrench.force.x for m in read_all(path)['/pulsejet/thrust']] == [
         0.25 * i for i in range(5)
     ]
+    # as rosbag2 records: publish_time is the middleware's send time (inside its publish() call),
+    # log_time the receive time, never earlier
+    from mcap.reader import make_reader
+
+    with open(path, 'rb') as fh:
+        records = [r for _, _, r in make_reader(fh).iter_messages()]
+    assert len(records) == 5
+    for (before, after), r in zip(sent_between, records):
+        assert before <= r.publish_time <= after, (before, r.publish_time, after)
+        assert r.publish_time <= r.log_time, (r.publish_time, r.log_time)
 
 
 @pytest.mark.timeout(60)

@@ -5,8 +5,11 @@ Commands arrive on any thread through an inbox (`accept`, `reject`): the caller 
 physics batch. The pacing thread applies them in arrival order, then ticks the session on a grid of
 wall-clock publication periods and hands every event to `emit`. Services and parameter changes
 take the session through `locked()`, which first applies what the inbox holds, so they see every
-command that arrived before them. sim_node is DDS I/O around this loop; the tests drive it with a
-real session and no DDS.
+command that arrived before them, and which the pacing thread lets in before its next tick even
+when it runs behind and never sleeps (a plain lock would be re-taken at once by the thread that
+just released it: sim_node's executor, waiting there for its 1 Hz diagnostics, took no commands
+for a tenth of a second and more, and the command watchdog tripped). sim_node is DDS I/O around
+this loop; the tests drive it with a real session and no DDS.
 """
 
 from __future__ import annotations
@@ -24,6 +27,9 @@ from pulsejet_sim.models.base import CommandError
 Events = list
 #: the pacing thread joins within this time at close (a batch in progress finishes first)
 JOIN_TIMEOUT_S = 2.0
+#: the longest the pacing thread waits for a thread it let in to take the session (that thread is
+#: already blocked on the lock, so it normally takes it within microseconds)
+HANDOFF_TIMEOUT_S = 0.05
 
 
 class LiveLoop:
@@ -58,6 +64,10 @@ class LiveLoop:
         self.clock = clock
         # the pacing thread and every other caller share the session under this lock
         self.lock = threading.RLock()
+        # threads waiting in locked(): the pacing thread hands them the lock before its next tick
+        self._waiting = 0
+        self._waiting_lock = threading.Lock()
+        self._admitted = threading.Event()  # set by a waiting thread once it holds the lock
         self._inbox: collections.deque = collections.deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
@@ -79,9 +89,19 @@ class LiveLoop:
     @contextlib.contextmanager
     def locked(self) -> Iterator[Session]:
         """Hold the session, with every command received so far applied."""
-        with self.lock:
+        with self._waiting_lock:
+            self._waiting += 1
+        try:
+            self.lock.acquire()
+        finally:
+            with self._waiting_lock:
+                self._waiting -= 1
+        self._admitted.set()
+        try:
             self.apply_inbox()
             yield self.session
+        finally:
+            self.lock.release()
 
     def start(self) -> None:
         if self._thread is None:
@@ -120,6 +140,7 @@ class LiveLoop:
             now = self.clock()
             try:
                 with self.lock:
+                    self._admitted.clear()  # only a thread let in after this tick counts
                     self.apply_inbox()  # in closed_loop pacing this runs the next control period
                     if now >= next_tick:
                         self.emit(self.tick(now))
@@ -132,6 +153,8 @@ class LiveLoop:
                 self.session.done = True
                 self.on_failure(f'pacing thread stopped: {type(exc).__name__}: {exc}')
                 return
+            if self._waiting:  # let the waiting thread take the session before the next tick
+                self._admitted.wait(HANDOFF_TIMEOUT_S)
             delay = next_tick - self.clock()
             if delay > 0:
                 self._wake.wait(delay)  # a command (or the stop) wakes the loop early

@@ -96,8 +96,8 @@ def run_demo(
     quiet: bool = False,
 ) -> dict:
     """Run the demo; returns {'mcap': Path, 'codes': {...}, 'messages': int}. Raises DemoError."""
+    from pulsejet_sim.ros.executor import make_executor
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
 
     if duration_s <= 0:
         raise DemoError(f'--duration={duration_s!r}; allowed: > 0 s of simulated time')
@@ -158,7 +158,7 @@ def run_demo(
     interrupted = False
     try:
         node = rclpy.create_node('pulsejet_demo_recorder', context=context)
-        executor = SingleThreadedExecutor(context=context)
+        executor = make_executor(context=context)
         executor.add_node(node)
         recorder = make_recorder(node, out)
         for name, cmd in commands.items():

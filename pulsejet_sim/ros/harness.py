@@ -210,9 +210,9 @@ class SimHarness:
     def start(self) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import TwistStamped, WrenchStamped
+        from pulsejet_sim.ros.executor import make_executor
         from rcl_interfaces.srv import GetParameters, SetParameters
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import JointState
@@ -247,7 +247,7 @@ class SimHarness:
             signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
         )
         self.node = rclpy.create_node(f'sim_harness_{os.getpid()}', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = make_executor(context=self.context)
         self.executor.add_node(self.node)
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.qos = qos

@@ -15,10 +15,11 @@ import time
 import traceback
 from typing import Callable
 
+from pulsejet_sim.ros.executor import make_executor
 import rclpy
 from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 #: after the node says it is done, keep spinning this long so the last samples reach reliable
@@ -57,12 +58,15 @@ def freeze_start_up_objects() -> None:
     gc.freeze()
 
 
-def run_node(name: str, make_node: Callable[[], Node], args=None) -> int:
+def run_node(
+    name: str, make_node: Callable[[], Node], args=None, executor_kind: str | None = None
+) -> int:
     """
     Create the node, spin until a signal or until ``node.done``, then close it.
 
     Optional hooks on the node: ``start()`` after it joined the executor, ``done`` (bool),
     ``exit_code`` (int, default 0), ``on_stop(signum or None)`` before closing, ``close()``.
+    executor_kind: `pulsejet_sim.ros.executor.make_executor`'s kind (default: its choice).
     Returns the process exit code.
     """
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
@@ -81,7 +85,7 @@ def run_node(name: str, make_node: Callable[[], Node], args=None) -> int:
 
     try:
         node = make_node()
-        executor = SingleThreadedExecutor()
+        executor = make_executor(kind=executor_kind)
         executor.add_node(node)
         if hasattr(node, 'start'):
             node.start()

@@ -1,8 +1,14 @@
 r"""
 ROS 2 node `recorder`: write subscribed topics to one MCAP file (rosbag2 layout) as they arrive.
 
-Messages are taken raw (CDR bytes, no deserialization) and logged with their receive time (system
-clock, ns), like `ros2 bag record`; analysis uses the simulation-time header stamps inside them.
+Messages are taken raw (CDR bytes, no deserialization) and logged like `ros2 bag record` (Jazzy's
+rosbag2_transport recorder): MCAP log_time is the middleware's receive time and publish_time its
+source (send) time, both from the rmw message info (system clock, ns; the recorder's own clock when
+the middleware gives none). A send time is when the publisher published, whatever the recorder's
+executor was doing: gaps in it locate a stall in the publisher. The message info needs the
+single-threaded executor (`PULSEJET_EXECUTOR=single`); with the default events executor, which
+takes a 1 kHz topic for a third of the CPU (pulsejet_sim.ros.executor), both times are the
+recorder's receive time. Analysis uses the simulation-time header stamps inside the messages.
 
     ros2 run pulsejet_sim recorder --ros-args -p output:=runs/x.mcap \
         -p topics:="['pulsejet/velocity']"
@@ -29,6 +35,7 @@ from typing import Iterable, Sequence
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.writer import BagError, BagWriter, qos_profiles_yaml
 from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.executor import executor_kind
 from pulsejet_sim.ros.node_main import freeze_start_up_objects
 from pulsejet_sim.ros.node_params import ParamSpec
 from rclpy.node import Node
@@ -147,8 +154,18 @@ class Recorder:
     its publishers offered. The node's executor must spin (the discovery runs on a timer).
     """
 
-    def __init__(self, node: Node, path: str | Path, topics: Sequence[str] | None = None) -> None:
+    def __init__(
+        self,
+        node: Node,
+        path: str | Path,
+        topics: Sequence[str] | None = None,
+        send_times: bool | None = None,
+    ) -> None:
         self.node = node
+        # rclpy 7.1.6's events executor cannot pass the message info (it raises SystemError): with
+        # it, publish_time is the receive time too (default: send times with the single-threaded
+        # executor only)
+        self.send_times = (executor_kind() == 'single') if send_times is None else send_times
         wanted = parse_topics(topics if topics is not None else list(messages.TOPIC_TYPES))
         self.writer = BagWriter(path, flush_period_s=FLUSH_PERIOD_S)
         self.path = self.writer.path
@@ -186,21 +203,32 @@ class Recorder:
                 )
 
     def _make_callback(self, topic: str, type_name: str):
-        def on_message(data: bytes) -> None:
-            receive_ns = time.time_ns()
+        def write(data: bytes, receive_ns: int, send_ns: int) -> None:
             try:
                 if topic not in self.writer.topics:
                     infos = self.node.get_publishers_info_by_topic(topic)
                     self.writer.add_topic(
                         topic, type_name, qos_profiles_yaml(i.qos_profile for i in infos)
                     )
-                self.writer.write(topic, data, receive_ns)
+                self.writer.write(topic, data, receive_ns, send_ns)
             except BagError:
                 if not self.writer.closed:
                     raise
                 # else: delivered by an executor thread while close() ran; recording has ended
 
-        return on_message
+        if not self.send_times:
+
+            def on_message(data: bytes) -> None:
+                now_ns = time.time_ns()
+                write(data, now_ns, now_ns)
+
+            return on_message
+
+        def on_message_with_info(data: bytes, info: dict) -> None:
+            receive_ns = info.get('received_timestamp') or time.time_ns()
+            write(data, receive_ns, info.get('source_timestamp') or receive_ns)
+
+        return on_message_with_info
 
     @property
     def message_counts(self) -> dict[str, int]:
@@ -228,8 +256,8 @@ class Recorder:
 
 
 def main(args: list[str] | None = None) -> int:
+    from pulsejet_sim.ros.executor import make_executor
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
     # rclpy's own handlers would shut the context down, and with it the messages delivered but
@@ -258,7 +286,7 @@ def main(args: list[str] | None = None) -> int:
         return 2
     print(f'recorder: writing {recorder.path} ({len(topics)} topics)', flush=True)
     freeze_start_up_objects()
-    executor = SingleThreadedExecutor()
+    executor = make_executor()
     executor.add_node(node)
     try:
         while not stop.is_set() and rclpy.ok():

@@ -597,8 +597,8 @@ def read_parameters(node: Any) -> dict[str, Any]:
 
 
 def main(args: Sequence[str] | None = None) -> int:
+    from pulsejet_sim.ros.executor import make_executor
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.signals import SignalHandlerOptions
 
@@ -638,7 +638,7 @@ def main(args: Sequence[str] | None = None) -> int:
     # before the executor is shut down: Executor.shutdown() in rclpy 7.1 does not wait for a spin()
     # running in another thread, and destroying its guard condition under it aborts the process at
     # exit.
-    executor = SingleThreadedExecutor()
+    executor = make_executor()
     executor.add_node(node)
     spinning = threading.Event()
     spinning.set()

@@ -1,0 +1,57 @@
+"""
+The executor every pulsejet process spins.
+
+rclpy's `EventsExecutor` (rclpy.experimental, in Jazzy's rclpy since 7.1) where this rclpy has
+it, else `SingleThreadedExecutor`. The events executor takes each message from a queue the
+middleware fills instead of rebuilding a wait set per callback: on a 1 kHz /clock subscription it
+costs about a third of the CPU (benchmarks/bench_executor.py, results in
+benchmarks/results/executor.md). On a 2-core machine that runs sim_node, a controller and a
+recorder at 1 kHz this is the difference between a machine with headroom and one that drops
+simulated time. It raises a callback's exception from spin_once, as the single-threaded
+executor does, and runs wall-clock timers on time (test/test_executor.py).
+
+Not for a node whose timers run on simulated time: rclpy 7.1.6's events executor waits for such a
+timer in wall time and then fires it in bursts, more often than its period, whenever the simulated
+clock does not run at the wall rate (a 20 ms timer over 1 s of simulated time published at half
+the wall rate fired 63 times, not 50). controller_node's command timer is one, so it keeps the
+single-threaded executor (`run_node(..., executor_kind='single')`).
+
+`PULSEJET_EXECUTOR=single` selects the single-threaded executor (e.g. to rule the events executor
+out when chasing a bug).
+"""
+
+from __future__ import annotations
+
+import os
+
+from rclpy.executors import Executor, SingleThreadedExecutor
+
+EXECUTOR_ENV = 'PULSEJET_EXECUTOR'
+EXECUTOR_KINDS = ('events', 'single')
+
+
+def executor_kind() -> str:
+    """Return the executor `make_executor` builds: 'events' where available, or the env's."""
+    wanted = os.environ.get(EXECUTOR_ENV, 'events') or 'events'
+    if wanted not in EXECUTOR_KINDS:
+        raise ValueError(
+            f'{EXECUTOR_ENV}={wanted!r} rejected; allowed: one of {", ".join(EXECUTOR_KINDS)}'
+        )
+    if wanted == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor  # noqa: F401
+        except ImportError:  # an rclpy older than the events executor
+            return 'single'
+    return wanted
+
+
+def make_executor(context=None, kind: str | None = None) -> Executor:
+    """Return a new executor of `kind` (default `executor_kind()`) on `context`."""
+    kind = executor_kind() if kind is None else kind
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    if kind == 'single':
+        return SingleThreadedExecutor(context=context)
+    raise ValueError(f'kind={kind!r} rejected; allowed: one of {", ".join(EXECUTOR_KINDS)}')
