@@ -9,6 +9,8 @@ half cosines; see FIRST_VERSION_ROUTINES). Writes benchmarks/results/paper000_st
     .venv/bin/python benchmarks/paper000_experiments.py --only fig12_edge,fixed_nozzle
 
 `--only` runs the named experiments and replaces (or adds) only their sections of experiments.md.
+`--version 2` runs them on the study's second version instead (its triangle routines, the stored
+`study.csv`; nothing else differs) and writes experiments_v2.md; the first version's file stays.
 Runs go one after the other in this process (one core). Experiments marked `refine` also rerun
 every case at twice the elements and half the step (the study's REFINED) and store both.
 
@@ -283,7 +285,13 @@ def verdicts(rows, stored, keep, coupling, prefix):
     return [f for f in study.findings(group) if f[0].startswith(prefix)]
 
 
-def section(key: str, exp: Experiment, specs: list[RunSpec], stored: list[dict]) -> str:
+def section(
+    key: str,
+    exp: Experiment,
+    specs: list[RunSpec],
+    stored: list[dict],
+    command: str = 'benchmarks/paper000_experiments.py',
+) -> str:
     start = time.perf_counter()
     cases = [
         exp.change(s)
@@ -309,7 +317,7 @@ def section(key: str, exp: Experiment, specs: list[RunSpec], stored: list[dict])
             f'Experiment `{key}` '
             f'({datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, '
             f'{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; '
-            f'command `.venv/bin/python benchmarks/paper000_experiments.py --only {key}`, '
+            f'command `.venv/bin/python {command} --only {key}`, '
             f'one process, {wall:.0f} s wall; '
             f"{len(cases)} runs at the study's 96 elements / 0.5 ms and again at 192 / 0.25 ms).",
             '',
@@ -400,6 +408,13 @@ def main(argv=None) -> int:
     parser.add_argument(
         '--only', default='', help='comma-separated experiments: ' + ', '.join(EXPERIMENTS)
     )
+    parser.add_argument(
+        '--version',
+        type=int,
+        choices=(1, 2),
+        default=1,
+        help="the study version to change one reading of (default 1, the experiments' first run)",
+    )
     args = parser.parse_args(argv)
     keys = [k for k in args.only.split(',') if k] or list(EXPERIMENTS)
     unknown = [k for k in keys if k not in EXPERIMENTS]
@@ -409,25 +424,40 @@ def main(argv=None) -> int:
             f'allowed: {", ".join(EXPERIMENTS)}'
         )
     _, specs = load_sweep(study.SWEEP)
-    specs = [first_version(s) for s in specs]
-    stored = study.read_table(FIRST_VERSION_TABLE)
-    path = study.OUT / 'experiments.md'
+    if args.version == 1:
+        specs = [first_version(s) for s in specs]
+        stored = study.read_table(FIRST_VERSION_TABLE)
+        path = study.OUT / 'experiments.md'
+        version_text = (
+            "All of them ran on the study's first version (routines of 30 % / 45 % half cosines, "
+            "`first_version/`), and 'study (stored)' is that version's table."
+        )
+    else:
+        stored = study.read_table(study.OUT / 'study.csv')
+        path = study.OUT / 'experiments_v2.md'
+        version_text = (
+            "All of them ran on the study's second version (the authors' code's triangle "
+            "routines, the study as stored), and 'study (stored)' is its `study.csv`."
+        )
+    command = 'benchmarks/paper000_experiments.py' + (
+        ' --version 2' if args.version == 2 else ''
+    )
     start = time.perf_counter()
-    new = {EXPERIMENTS[k].letter: section(k, EXPERIMENTS[k], specs, stored) for k in keys}
+    new = {
+        EXPERIMENTS[k].letter: section(k, EXPERIMENTS[k], specs, stored, command) for k in keys
+    }
     if len(keys) == len(EXPERIMENTS) or not path.exists():
         now = f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}'
         preamble = (
             '# Paper 000 study: experiments on the readings\n\n'
             f'All experiments: {now}, {platform.machine()}, '
             f'{os.cpu_count()} cores, Python {platform.python_version()}; command '
-            '`.venv/bin/python benchmarks/paper000_experiments.py`, '
+            f'`.venv/bin/python {command}`, '
             f'{time.perf_counter() - start:.0f} s wall '
             '(an experiment rerun alone with `--only` states its own run in its section).\n\n'
             'Each experiment changes one reading and keeps every other value of '
             "`config/sweeps/paper000_study.yaml`; the finding rules are the study's. "
-            'Not the study: its values stay as chosen. All of them ran on the '
-            "study's first version (routines of 30 % / 45 % half cosines, `first_version/`), "
-            "and 'study (stored)' is that version's table.\n"
+            f'Not the study: its values stay as chosen. {version_text}\n'
         )
         sections = {}
     else:

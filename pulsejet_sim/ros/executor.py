@@ -22,7 +22,11 @@ out when chasing a bug).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
+import sys
+from typing import Iterator
 
 from rclpy.executors import Executor, SingleThreadedExecutor
 
@@ -45,13 +49,33 @@ def executor_kind() -> str:
     return wanted
 
 
+@contextlib.contextmanager
+def _stderr_with_a_file() -> Iterator[None]:
+    try:
+        sys.stderr.fileno()
+        has_file = True
+    except (AttributeError, OSError, io.UnsupportedOperation, ValueError):
+        has_file = False
+    if has_file or sys.__stderr__ is None:
+        yield
+        return
+    saved, sys.stderr = sys.stderr, sys.__stderr__
+    try:
+        yield
+    finally:
+        sys.stderr = saved
+
+
 def make_executor(context=None, kind: str | None = None) -> Executor:
     """Return a new executor of `kind` (default `executor_kind()`) on `context`."""
     kind = executor_kind() if kind is None else kind
     if kind == 'events':
         from rclpy.experimental import EventsExecutor
 
-        return EventsExecutor(context=context)
+        # it calls faulthandler.enable(), which needs a real file behind sys.stderr: under a
+        # capturing test runner or a GUI there is none, so it is given the process's own
+        with _stderr_with_a_file():
+            return EventsExecutor(context=context)
     if kind == 'single':
         return SingleThreadedExecutor(context=context)
     raise ValueError(f'kind={kind!r} rejected; allowed: one of {", ".join(EXECUTOR_KINDS)}')
