@@ -6,15 +6,19 @@ It follows the node's ROS clock (simulation time from /clock through rclpy's tim
 
 A thin adapter: the state machine lives in `pulsejet_ctrl.routines` (PumpValveRoutine, or
 CableRoutine for a shell scene whose cable follows a routine: the scene is loaded command-driven,
-so the simulator takes the cable force from here). The routine is evaluated by a timer at
-`rate_hz` on the node's clock (`self.get_clock()`): with `use_sim_time` (the default here) that is
-*simulation* time, so the command sequence does not depend on the simulator's real-time factor
-beyond the clock's own resolution, and pause, lockstep steps and resets drive it. When the time
-goes back (a simulator reset, a restarted simulator, a looping replay: a clock jump callback) the
-routine restarts and answers the new time at once. ROS time 0 means the simulation has not started
-(or was reset and is held there): a /clock at 0 moves no clock, so while the clock reads 0 the
-routine's command for t = 0 is re-sent every STANDBY_PERIOD_S of wall time and the simulator starts
-with it. With `-p use_sim_time:=false` the routine runs in wall time from the node's start.
+so the simulator takes the cable force from here). The routine is evaluated at `rate_hz` of the
+node's clock (`self.get_clock()`): with `use_sim_time` (the default here) that is *simulation*
+time, so the command sequence does not depend on the simulator's real-time factor beyond the
+clock's own resolution, and pause, lockstep steps and resets drive it. In simulated time the
+commands are scheduled by the clock itself (a jump callback on every /clock update sends one when
+the clock reaches the next period, as an rcl timer on that clock would), not by an rclpy timer: the
+events executor this node spins (pulsejet_sim.ros.executor, a third of the CPU per message) waits
+for a timer on simulated time in wall time and fires it in bursts when the clock does not run at
+the wall rate. When the time goes back (a simulator reset, a restarted simulator, a looping replay)
+the routine restarts and answers the new time at once. ROS time 0 means the simulation has not
+started (or was reset and is held there): a /clock at 0 moves no clock, so while the clock reads 0
+the routine's command for t = 0 is re-sent every STANDBY_PERIOD_S of wall time and the simulator
+starts with it. With `-p use_sim_time:=false` the routine runs in wall time from the node's start.
 
 ROS parameters
   scene             (string, read-only)  scene whose `routine:` block gives the kind and
@@ -208,14 +212,20 @@ class ControllerNode(Node):
                 best_effort,
             )
         else:
-            # on the node's clock: fires when /clock (through the TimeSource) passes each period;
-            # created while the clock reads 0, so its grid is k / rate_hz of simulated time
+            # wall time (use_sim_time false): an rclpy timer on the node clock; in simulated time
+            # the clock's own updates schedule the commands (_on_time_jump), on the grid
+            # k / rate_hz of simulated time from the clock's start at 0
             self._timer = self.create_timer(self.period_s, self._on_timer)
-            # backwards jumps (reset, restarted simulator, looping replay) and use_sim_time
-            # switches
+            self._next_due_ns = self._period_ns()
+            if clock.ros_time_is_active:
+                self._timer.cancel()
+            # every /clock update (forward and back: reset, restarted simulator, looping replay)
+            # and use_sim_time switches
             self._jump_handle = clock.create_jump_callback(
                 JumpThreshold(
-                    min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=True
+                    min_forward=Duration(nanoseconds=1),
+                    min_backward=Duration(nanoseconds=-1),
+                    on_clock_change=True,
                 ),
                 post_callback=self._on_time_jump,
             )
@@ -243,8 +253,11 @@ class ControllerNode(Node):
             self.rate_hz = checked['rate_hz']
             self.period_s = 1.0 / self.rate_hz
             if self._timer is not None:  # the new period from now on (not after the old one)
-                self._timer.timer_period_ns = int(self.period_s * 1e9)
-                self._timer.reset()
+                self._timer.timer_period_ns = self._period_ns()
+                if self.get_clock().ros_time_is_active:
+                    self._next_due_ns = self.get_clock().now().nanoseconds + self._period_ns()
+                else:
+                    self._timer.reset()
             self.get_logger().info(f'command rate set to {self.rate_hz:g} Hz of the node clock')
         return SetParametersResult(successful=True)
 
@@ -303,6 +316,9 @@ class ControllerNode(Node):
         self._follow_time(t)  # also catches a wall clock stepped back (no jump callback for that)
         self._send(t)
 
+    def _period_ns(self) -> int:
+        return int(round(self.period_s * 1e9))
+
     def _on_time_jump(self, jump):
         """Post-jump callback of the node clock (runs where /clock is taken, in the executor)."""
         clock = self.get_clock()
@@ -314,12 +330,26 @@ class ControllerNode(Node):
             self.get_logger().info(
                 f'use_sim_time now {clock.ros_time_is_active}: restarting the routine'
             )
-            self._timer.reset()
+            if clock.ros_time_is_active:
+                self._timer.cancel()
+                self._next_due_ns = clock.now().nanoseconds + self._period_ns()
+            else:
+                self._timer.reset()
             return
-        t = self._routine_time()
-        self._follow_time(t)  # restarts the routine
-        self._timer.reset()  # next command one period after the new time
-        self._send(t)  # and the new time is answered at once
+        if not clock.ros_time_is_active:  # the system clock stepped: the wall timer goes on
+            return
+        now_ns = clock.now().nanoseconds
+        if jump.delta.nanoseconds < 0:  # back: the routine restarts and answers the new time
+            self._follow_time(self._routine_time())
+            self._send(self._routine_time())
+            self._next_due_ns = now_ns + self._period_ns()  # one period after the new time
+            return
+        if now_ns < self._next_due_ns:
+            return
+        # one command however many periods the clock passed, then the next point of the grid
+        self._on_timer()
+        period = self._period_ns()
+        self._next_due_ns += period * ((now_ns - self._next_due_ns) // period + 1)
 
     def _on_standby(self):
         """
@@ -348,9 +378,7 @@ class ControllerNode(Node):
 def main(args=None):
     from pulsejet_sim.ros.node_main import run_node
 
-    # its command timer runs on simulated time, which the events executor does not keep
-    # (pulsejet_sim.ros.executor)
-    return run_node('controller_node', ControllerNode, args, executor_kind='single')
+    return run_node('controller_node', ControllerNode, args)
 
 
 if __name__ == '__main__':

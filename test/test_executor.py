@@ -2,9 +2,9 @@
 The executor every pulsejet process spins (pulsejet_sim.ros.executor), in-process, real DDS.
 
 What the nodes rely on from it: wall-clock timers on time (sim_node's diagnostics, the
-recorder's flush); timers on simulated time with the single-threaded executor that
-controller_node keeps; a callback's exception reaches the caller of spin_once (node_main turns it
-into exit code 2, never a silent loss); the choice can be overridden.
+recorder's flush); a node clock on simulated time that follows /clock, which controller_node's
+command schedule reads through its jump callbacks; a callback's exception reaches the caller of
+spin_once (node_main turns it into exit code 2, never a silent loss); the choice can be overridden.
 """
 
 import time
@@ -13,16 +13,16 @@ from conftest import isolate_ros
 from pulsejet_sim.ros.executor import EXECUTOR_ENV, executor_kind, make_executor
 import pytest
 import rclpy
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 DOMAIN_OFFSET = 87
-TIMER_PERIOD_S = 0.02
-SIM_SECONDS = 1.0
 
 
 @pytest.fixture
@@ -66,45 +66,41 @@ def test_a_wall_clock_timer_fires_once_per_period(context):
 
 
 @pytest.mark.timeout(120)
-def test_a_node_clock_timer_runs_on_simulated_time_with_the_controllers_executor(context):
-    kind = 'single'  # controller_node's (run_node(..., executor_kind='single'))
+def test_every_clock_update_reaches_a_jump_callback_of_a_sim_time_node(context):
+    """Each /clock forward (and the jump back) reaches the callback, as controller_node needs."""
     node = rclpy.create_node(
-        'sim_time_timer',
+        'sim_time_jumps',
         context=context,
         parameter_overrides=[Parameter('use_sim_time', Parameter.Type.BOOL, True)],
     )
     clock_node = rclpy.create_node('clock_source', context=context)
-    fired_at_s = []
-    node.create_timer(
-        TIMER_PERIOD_S, lambda: fired_at_s.append(node.get_clock().now().nanoseconds * 1e-9)
+    seen_ns = []
+    handle = node.get_clock().create_jump_callback(
+        JumpThreshold(min_forward=Duration(nanoseconds=1), min_backward=Duration(nanoseconds=-1)),
+        post_callback=lambda jump: seen_ns.append(node.get_clock().now().nanoseconds),
     )
-    pub = clock_node.create_publisher(
-        Clock, '/clock', QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-    )
-    executor = make_executor(context=context, kind=kind)
+    pub = clock_node.create_publisher(Clock, '/clock', QoSProfile(depth=10))
+    executor = make_executor(context=context)
     executor.add_node(node)
     executor.add_node(clock_node)
+    sent_ns = [k * 1_000_000 for k in range(1, 201)] + [5_000_000]  # 200 ms, then back to 5 ms
     try:
         deadline = time.monotonic() + 60
         while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        steps = int(round(SIM_SECONDS / 1e-3))
-        for k in range(1, steps + 1):
+        for ns in sent_ns:
             msg = Clock()
-            msg.clock.sec, msg.clock.nanosec = divmod(k * 1_000_000, 1_000_000_000)
+            msg.clock.sec, msg.clock.nanosec = divmod(ns, 1_000_000_000)
             pub.publish(msg)
-            executor.spin_once(timeout_sec=0.002)
-        end = time.monotonic() + 2.0  # wall time passes: a wall-clock timer would keep firing
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
+            end = time.monotonic() + 5.0
+            while (not seen_ns or seen_ns[-1] != ns) and time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.01)
     finally:
         executor.shutdown()
+        del handle
         node.destroy_node()
         clock_node.destroy_node()
-    # fired on the simulated clock only: every firing reads a simulated time, none after its end
-    assert fired_at_s and max(fired_at_s) <= SIM_SECONDS + 1e-9, fired_at_s[-5:]
-    expected = SIM_SECONDS / TIMER_PERIOD_S
-    assert 0.8 * expected <= len(fired_at_s) <= expected + 1, len(fired_at_s)
+    assert seen_ns == sent_ns, (len(seen_ns), seen_ns[-3:])
 
 
 @pytest.mark.timeout(60)

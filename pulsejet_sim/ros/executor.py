@@ -10,11 +10,12 @@ recorder at 1 kHz this is the difference between a machine with headroom and one
 simulated time. It raises a callback's exception from spin_once, as the single-threaded
 executor does, and runs wall-clock timers on time (test/test_executor.py).
 
-Not for a node whose timers run on simulated time: rclpy 7.1.6's events executor waits for such a
-timer in wall time and then fires it in bursts, more often than its period, whenever the simulated
-clock does not run at the wall rate (a 20 ms timer over 1 s of simulated time published at half
-the wall rate fired 63 times, not 50). controller_node's command timer is one, so it keeps the
-single-threaded executor (`run_node(..., executor_kind='single')`).
+No pulsejet node runs an rclpy timer on simulated time: rclpy 7.1.6's events executor waits for
+such a timer in wall time and then fires it in bursts, more often than its period, whenever the
+simulated clock does not run at the wall rate (a 20 ms timer over 1 s of simulated time published
+at half the wall rate fired 63 times, not 50). controller_node schedules its commands from the
+clock's own updates instead (a jump callback per /clock). Nor does it pass a subscription's
+message info (a two-argument callback raises SystemError), which the recorder's send times need.
 
 `PULSEJET_EXECUTOR=single` selects the single-threaded executor (e.g. to rule the events executor
 out when chasing a bug).
