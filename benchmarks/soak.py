@@ -419,7 +419,8 @@ def table(r: dict) -> str:
             f'{TRIP_WINDOW_S:g} s of wall time before it, in send times (the publisher) and '
             'receive times (the recorder), ms. A '
             'command-send gap near 100 ms: the controller did not publish; none: sim_node did '
-            'not take what was published.\n\n'
+            'not take what was published; nan: no send times recorded (the recorder needs '
+            'PULSEJET_EXECUTOR=single for them).\n\n'
             '| trip logged (s of the wall clock) | command send | command receive | /clock send '
             '| /clock receive |\n|---|---|---|---|---|\n'
         )

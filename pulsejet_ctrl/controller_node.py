@@ -340,8 +340,9 @@ class ControllerNode(Node):
             return
         now_ns = clock.now().nanoseconds
         if jump.delta.nanoseconds < 0:  # back: the routine restarts and answers the new time
-            self._follow_time(self._routine_time())
-            self._send(self._routine_time())
+            t = self._routine_time()
+            self._follow_time(t)
+            self._send(t)
             self._next_due_ns = now_ns + self._period_ns()  # one period after the new time
             return
         if now_ns < self._next_due_ns:
