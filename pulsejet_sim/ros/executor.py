@@ -1,5 +1,5 @@
 """
-The executor every pulsejet process spins.
+The executor the pulsejet processes spin.
 
 rclpy's `EventsExecutor` (rclpy.experimental, in Jazzy's rclpy since 7.1) where this rclpy has
 it, else `SingleThreadedExecutor`. The events executor takes each message from a queue the
@@ -17,8 +17,16 @@ at half the wall rate fired 63 times, not 50). controller_node schedules its com
 clock's own updates instead (a jump callback per /clock). Nor does it pass a subscription's
 message info (a two-argument callback raises SystemError), which the recorder's send times need.
 
-`PULSEJET_EXECUTOR=single` selects the single-threaded executor (e.g. to rule the events executor
-out when chasing a bug).
+sim_node keeps the single-threaded executor: it serves events in arrival order, so under a flood
+of commands beyond the node's capacity (benchmarks/live_fuzz.py, 1.9 kHz of commands into the
+shell scene) a parameter or service request waited behind every queued message event: parameter
+dumps took up to 21 s (4 of 125 over 10 s), against at most a few seconds with the single-threaded
+executor, whose wait set takes each ready entity in turn. sim_node takes only commands (50-1000 a
+second in normal use), so the events executor's saving there is small; the controller and the
+recorder, which take the 1 kHz state, keep it.
+
+`PULSEJET_EXECUTOR=single` selects the single-threaded executor everywhere (e.g. to rule the
+events executor out when chasing a bug).
 """
 
 from __future__ import annotations

@@ -43,6 +43,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
 GIL_SWITCH_INTERVAL_S = 2e-4
+SIM_NODE_EXECUTOR = 'single'
 #: command-rejection warnings: a burst of this many, then this many per second; the rest are only
 #: counted (commands_rejected in /diagnostics) and summed up in the next warning
 REJECTION_LOG_BURST = 10
@@ -276,7 +277,10 @@ def main(args=None):
     # executor thread is busy (CPython's default switch interval is 5 ms); the kernels release it
     # while stepping
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
-    return run_node('sim_node', SimNode, args)
+    # the single-threaded executor: under a command flood beyond the node's capacity it still
+    # serves services and parameters in turn, where the events executor queues them behind every
+    # message event (pulsejet_sim.ros.executor)
+    return run_node('sim_node', SimNode, args, executor_kind=SIM_NODE_EXECUTOR)
 
 
 if __name__ == '__main__':
