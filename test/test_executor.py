@@ -1,10 +1,11 @@
 """
 The executor the pulsejet processes spin (pulsejet_sim.ros.executor), in-process, real DDS.
 
-What the nodes rely on from it: wall-clock timers never firing twice in a period (the recorder's
-flush, controller_node's standby); a node clock on simulated time that follows /clock, which controller_node's
-command schedule reads through its jump callbacks; a callback's exception reaches the caller of
-spin_once (node_main turns it into exit code 2, never a silent loss); the choice can be overridden.
+What the nodes rely on from it: wall-clock timers never firing twice in a period (the
+recorder's flush, controller_node's standby); a node clock on simulated time that follows /clock,
+which controller_node's command schedule reads through its jump callbacks; a callback's exception
+reaches the caller of spin_once (node_main turns it into exit code 2, never a silent loss); the
+choice can be overridden.
 """
 
 import time
