@@ -191,12 +191,9 @@ def soak(
         1 for _, _, _, values in diag if values.get('watchdog', '').startswith('tripped')
     )
     # every trip is logged; a 1 Hz diagnostics sample sees only those that last until it
+    trip_wall_s = [float(m.group(1)) for line in watchdog_log if (m := TRIP_LINE.search(line))]
     start_wall = start + realtime_minus_monotonic
-    trips = sum(
-        1
-        for line in watchdog_log
-        if (m := TRIP_LINE.search(line)) and float(m.group(1)) >= start_wall
-    )
+    trips = sum(1 for t in trip_wall_s if t >= start_wall)
     if record:  # receive times at the recorder (wall clock ns), from the end of the warm-up
         received = [ns * 1e-9 - realtime_minus_monotonic for ns in clock_receive_times_ns(bag)]
         clock_messages = len(received)
@@ -245,24 +242,24 @@ def soak(
     }
     if record:
         result['recording'] = read_back(bag)
-        result['trip_evidence'] = trip_evidence(bag, watchdog_log)
+        result['trip_evidence'] = trip_evidence(bag, trip_wall_s)
     return result
 
 
-def trip_evidence(path: Path, watchdog_log: list[str]) -> list[dict]:
+def trip_evidence(path: Path, trips: list[float]) -> list[dict]:
     """
     Say, per trip, which process stalled: the longest gaps before it in send and receive times.
 
     For the controller's commands and for sim_node's /clock: the longest gap between consecutive
-    send times (MCAP publish_time, the publisher's middleware time) and receive times (log_time,
-    at the recorder) in the TRIP_WINDOW_S of wall time before sim_node logged the trip. A trip
-    with no command-send gap near the 0.1 s timeout means the controller published on time and
-    sim_node did not take the commands; a command-send gap means the controller did not publish.
-    Read with the mcap library (an independent reader; rosbags does not expose publish_time).
+    send times (MCAP publish_time, the publisher's middleware time) and receive times (log_time, at
+    the recorder) in the TRIP_WINDOW_S of wall time before sim_node logged the trip (`trips`: the
+    wall times, s, of its trip log lines). A trip with no command-send gap near the 0.1 s timeout
+    means the controller published on time and sim_node did not take the commands; a command-send
+    gap means the controller did not publish. Read with the mcap library (an independent reader;
+    rosbags does not expose publish_time).
     """
     from mcap.reader import make_reader
 
-    trips = [float(m.group(1)) for line in watchdog_log if (m := TRIP_LINE.search(line))]
     if not trips:
         return []
     commands = {'/' + t for t in interface.COMMAND_TOPICS}

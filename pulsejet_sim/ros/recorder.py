@@ -35,7 +35,7 @@ from typing import Iterable, Sequence
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.writer import BagError, BagWriter, qos_profiles_yaml
 from pulsejet_sim.ros import messages
-from pulsejet_sim.ros.executor import executor_kind
+from pulsejet_sim.ros.executor import executor_kind, make_executor
 from pulsejet_sim.ros.node_main import freeze_start_up_objects
 from pulsejet_sim.ros.node_params import ParamSpec
 from rclpy.node import Node
@@ -256,7 +256,6 @@ class Recorder:
 
 
 def main(args: list[str] | None = None) -> int:
-    from pulsejet_sim.ros.executor import make_executor
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
