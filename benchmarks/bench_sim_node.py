@@ -7,9 +7,13 @@ Benchmark of the live sim_node: publication rate, period jitter and real-time fa
 
 Starts sim_node (and with --controller the controller_node, so the pump/valve cycle runs) as
 subprocesses in an isolated ROS domain with localhost discovery, subscribes to /clock in this
-process and measures from receive times (time.monotonic):
+process and measures:
   - achieved publication rate (messages / s of wall time),
-  - period jitter: p50, p99 and max of |receive period - nominal period|,
+  - period jitter: p50, p99 and max of |period - nominal period|, of the receive times
+    (time.monotonic in this process) and of sim_node's send times (the DDS source timestamp each
+    message carries, stamped inside sim_node's publish call),
+  - the machine's floor: the same jitter of a process that only sleeps to a grid at the same rate
+    (wake_floor.py, run beside the measurement),
   - real-time factor held: simulated time advanced / wall time,
   - the sim_node process's CPU use (user+sys / wall).
 Prints a markdown table and appends it to benchmarks/results/sim_node.md with a header (date,
@@ -32,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from live_common import cpu_seconds  # noqa: E402
 import numpy as np  # noqa: E402
 from pulsejet_sim.ros.node_params import ros_value  # noqa: E402
+import wake_floor  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'sim_node.md'
@@ -90,12 +95,15 @@ def run(
         signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
     )
     node = rclpy.create_node('bench_sim_node', context=context)
-    executor = make_executor(context=context)
+    # the single-threaded executor passes the message info (send times); the events executor
+    # cannot (pulsejet_sim.ros.executor)
+    executor = make_executor(context=context, kind='single')
     executor.add_node(node)
-    recv, stamps = [], []
+    recv, sent, stamps = [], [], []
 
-    def on_clock(msg):
+    def on_clock(msg, info):
         recv.append(time.monotonic())
+        sent.append(info['source_timestamp'] * 1e-9)
         stamps.append(msg.clock.sec + msg.clock.nanosec * 1e-9)
 
     node.create_subscription(
@@ -142,6 +150,7 @@ def run(
         while time.monotonic() < settle:
             executor.spin_once(timeout_sec=0.05)
         start_index = len(recv)
+        floor = wake_floor.start(seconds, nominal_rate)
         cpu0, wall0 = cpu_seconds(sim.pid), time.monotonic()
         end = wall0 + seconds
         while time.monotonic() < end:
@@ -149,6 +158,7 @@ def run(
             if sim.poll() is not None:
                 raise RuntimeError(f'sim_node exited with {sim.returncode}')
         cpu1, wall1 = cpu_seconds(sim.pid), time.monotonic()
+        floor_result = wake_floor.result(floor)
     finally:
         for p in reversed(procs):
             stop(p)
@@ -157,9 +167,9 @@ def run(
 
     t = np.array(recv[start_index:])
     s = np.array(stamps[start_index:])
-    periods = np.diff(t)
     nominal = 1.0 / nominal_rate
-    dev = np.abs(periods - nominal)
+    dev = np.abs(np.diff(t) - nominal)
+    send_dev = np.abs(np.diff(np.array(sent[start_index:])) - nominal)
     sim_steps = np.diff(s)
     return {
         'scene': scene,
@@ -171,6 +181,10 @@ def run(
         'jitter_p50_ms': float(np.percentile(dev, 50) * 1e3),
         'jitter_p99_ms': float(np.percentile(dev, 99) * 1e3),
         'jitter_max_ms': float(dev.max() * 1e3),
+        'send_jitter_p50_ms': float(np.percentile(send_dev, 50) * 1e3),
+        'send_jitter_p99_ms': float(np.percentile(send_dev, 99) * 1e3),
+        'send_jitter_max_ms': float(send_dev.max() * 1e3),
+        'floor': floor_result,
         'rtf_held': float((s[-1] - s[0]) / (t[-1] - t[0])),
         'sim_step_per_msg_ms': float(np.median(sim_steps) * 1e3),
         'cpu_percent': float(100 * (cpu1 - cpu0) / (wall1 - wall0)),
@@ -194,6 +208,16 @@ def table(r: dict) -> str:
         ('period jitter p50 (abs(T - T0))', f"{r['jitter_p50_ms']:.3f} ms"),
         ('period jitter p99 (abs(T - T0))', f"{r['jitter_p99_ms']:.3f} ms"),
         ('period jitter max', f"{r['jitter_max_ms']:.3f} ms"),
+        (
+            "send period jitter p50 / p99 / max (sim_node's publish times)",
+            f"{r['send_jitter_p50_ms']:.3f} / {r['send_jitter_p99_ms']:.3f} /"
+            f" {r['send_jitter_max_ms']:.3f} ms",
+        ),
+        (
+            'machine floor: idle wake-up jitter p50 / p99 / max (wake_floor.py)',
+            f"{r['floor']['jitter_p50_ms']:.3f} / {r['floor']['jitter_p99_ms']:.3f} /"
+            f" {r['floor']['jitter_max_ms']:.3f} ms",
+        ),
         ('simulated time per message (median)', f"{r['sim_step_per_msg_ms']:.3f} ms"),
         ('sim_node CPU (user+sys / wall)', f"{r['cpu_percent']:.1f} %"),
     ]

@@ -143,8 +143,9 @@ def _batch_against_single(scene, overrides, n, exact, calls=10, steps=300, fault
             q, v = np.zeros(n), np.ones(n)
         else:
             q = rng.choice([0.0, 1e-3, 2.5e-3, 5e-3], n)
-            # 0.005: RK4 sub-steps; 1 -> 0: the valve seals
-            v = rng.choice([0.0, 0.005, 0.3, 1.0], n)
+            # 0.005: RK4 sub-steps; 1 -> 0: the valve seals; 0.30001 and 0.0021 -> 0: its stroke
+            # would pass below the valve's seat, where it seals
+            v = rng.choice([0.0, 0.005, 0.3, 1.0, 0.30001, 0.0021], n)
         kernel(model.flags, Y, P, q, v, steps, model.dt_s, done, status)
         for i in range(n):
             if status_s[i] == K.OK:

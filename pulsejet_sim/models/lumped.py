@@ -188,7 +188,7 @@ class LumpedModel:
         )
         if (
             0.0 < act['initial_valve_opening'] < VALVE_MIN_OPENING
-        ):  # 1/opening^2 overflows in the orifice loss
+        ):  # below the valve's seat (base.VALVE_MIN_OPENING)
             raise ModelError(
                 f'actuator.initial_valve_opening: {act["initial_valve_opening"]!r} is out of '
                 'range; '

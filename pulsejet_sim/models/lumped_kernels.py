@@ -42,6 +42,10 @@ import math
 
 from numba import literally, njit
 import numpy as np
+from pulsejet_sim.models.base import VALVE_MIN_OPENING
+
+# the valve's seat: its opening is 0 or in [VALVE_SEAT, 1] (base.VALVE_MIN_OPENING says why)
+VALVE_SEAT = VALVE_MIN_OPENING
 
 # ---- term bits --------------------------------------------------------------------------------
 T_SHELL_INERTIA = 1 << 0
@@ -471,6 +475,9 @@ def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
                 new_valve = valve + stroke
             elif valve_cmd < valve - stroke:
                 new_valve = valve - stroke
+            if 0.0 < new_valve < VALVE_SEAT:
+                # it cracks open to its seat, or seals when closing would pass below it
+                new_valve = VALVE_SEAT if valve_cmd > valve else 0.0
             if new_valve <= 0.0 < valve:
                 # sealing a moving flow: the water in the nozzle stops and the shell follows the
                 # pump; the kinetic energy this removes is lost in the valve
@@ -542,9 +549,9 @@ def specialised(dispatcher, flags: int, *args):
 # outputs at the publication rate. Piecewise-smooth inputs are handled by integrating segments on
 # which they are smooth: the caller's command is constant over a call and the valve moves linearly
 # at its stroke rate until it reaches the command (a kink), so the integration stops exactly at the
-# kink and the step-size controller restarts there and at every command change. When the valve
-# reaches 0 the cavity seals with the same jump (and the same valve-loss booking) as the fixed-step
-# path. The fixed-step RK4 path above is untouched.
+# kink and the step-size controller restarts there and at every command change. A shut valve cracks
+# open to its seat (VALVE_SEAT) and a closing one seals there, with the same jump (and the same
+# valve-loss booking) as the fixed-step path.
 DP_C2, DP_C3, DP_C4, DP_C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
 DP_A21 = 1.0 / 5.0
 DP_A31, DP_A32 = 3.0 / 40.0, 9.0 / 40.0
@@ -584,11 +591,6 @@ ADAPT_FAC_MAX = 10.0
 ADAPT_BETA = 0.04  # PI part of the controller (0: classical I controller)
 ADAPT_MAX_STEPS = 10_000_000  # per call; beyond: ERR_SUBSTEPS
 ADAPT_H_MIN = 1e-12  # s; a step below it is a fault (stiffness out of range)
-# A valve closing on a moving flow is stiff like 1/opening near the end of its stroke, so the steps
-# shrink geometrically towards the instant it seals; the cavity is sealed this long before it (at
-# an opening of SEAL_SNAP_S x stroke rate, 2e-6 for a 50 ms stroke; the fixed step seals from dt x
-# rate)
-SEAL_SNAP_S = 1e-7
 # step-memory slots appended to the state vector of an adaptive run (after the NY physical ones)
 M_H = 0  # next step size, s (0: restart the controller)
 M_ERR = 1  # previous accepted error norm (PI controller)
@@ -677,7 +679,6 @@ def _segment(
     v_rate,
     t0,
     t1,
-    snap,
     rtol,
     atol,
     mem,
@@ -693,9 +694,8 @@ def _segment(
     """
     Integrate y from t0 to t1 with the valve at v0 + v_rate (t - t0) (a smooth segment).
 
-    Outputs at the times t_out[j] in (t0, t1] by Hermite interpolation. The segment ends early once
-    less than `snap` seconds are left (a valve closing to 0: see SEAL_SNAP_S). Returns (status,
-    outputs written, time reached).
+    Outputs at the times t_out[j] in (t0, t1] by Hermite interpolation. Returns (status, outputs
+    written, time reached).
     """
     k1 = ks[0]
     k2 = ks[1]
@@ -708,7 +708,7 @@ def _segment(
     j = n_out_done
     n_out = t_out.shape[0]
     t = t0
-    if t1 - t0 <= snap or t1 <= t0:
+    if t1 <= t0:
         stats[S_T_DONE] = t0
         return OK, j, t0
     rhs(flags, y, v0, q_cmd, p, k1, diag)
@@ -719,7 +719,7 @@ def _segment(
         stats[S_RHS] += 1
         mem[M_ERR] = 1e-4
     steps = 0
-    while t < t1 - snap:
+    while t < t1:
         last = False
         if t + h >= t1 - (1e-9 + 1e-15 * abs(t1)):  # no sliver steps before a kink
             h_step = t1 - t
@@ -809,7 +809,7 @@ def _segment(
             stats[S_REJECTED] += 1
             fac = max(ADAPT_FAC_MIN, ADAPT_SAFETY * err**-0.2)
             h = h_step * min(fac, 1.0)
-        if h < ADAPT_H_MIN and t < t1 - snap:
+        if h < ADAPT_H_MIN and t < t1:
             stats[S_T_DONE] = t
             return ERR_SUBSTEPS, j, t
         steps += 1
@@ -845,19 +845,22 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
         return OK, n_written
     v0 = y[Y_VALVE]
     t = 0.0
+    if v0 <= 0.0 < valve_cmd:
+        # a shut valve cracks open to its seat at once, then moves at its stroke rate
+        v0 = VALVE_SEAT
+        y[Y_VALVE] = v0
     if valve_cmd != v0 and abs(valve_cmd - v0) <= 1e-12 and not (valve_cmd <= 0.0 < v0):
         y[Y_VALVE] = valve_cmd  # a round-off remainder of a ramp: no sliver segment
         v0 = valve_cmd
     if valve_cmd != v0:
         rate = p[P_VALVE_RATE]
-        t_ramp = abs(valve_cmd - v0) / rate
+        # a valve closing to 0 seals when it reaches its seat
+        ramp_end = valve_cmd if valve_cmd > 0.0 else VALVE_SEAT
+        t_ramp = abs(ramp_end - v0) / rate
         if abs(t_ramp - duration) <= 1e-12 * duration:
             t_ramp = duration  # the ramp ends with the call (round-off of the stroke arithmetic)
         v_rate = rate if valve_cmd > v0 else -rate
         t_end = min(t_ramp, duration)
-        snap = 0.0
-        if valve_cmd <= 0.0 and t_ramp <= duration:
-            snap = SEAL_SNAP_S
         status, n_written, t = _segment(
             flags,
             y,
@@ -867,7 +870,6 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
             v_rate,
             0.0,
             t_end,
-            snap,
             rtol,
             atol,
             mem,
@@ -903,7 +905,6 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
             0.0,
             t,
             duration,
-            0.0,
             rtol,
             atol,
             mem,
