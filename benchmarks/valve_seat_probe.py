@@ -102,7 +102,7 @@ def main(argv=None) -> int:
         text=True,
     ).stdout.strip()
     dirty = subprocess.run(
-        ['git', '-C', str(code), 'status', '--porcelain', '--untracked-files=no'],
+        ['git', '-C', str(code), 'status', '--porcelain', '--', 'pulsejet_sim'],
         capture_output=True,
         text=True,
     ).stdout.strip()
@@ -110,7 +110,7 @@ def main(argv=None) -> int:
 
     now = datetime.datetime.now(datetime.timezone.utc)
     text = (
-        f'## {now:%Y-%m-%d %H:%M UTC}, model of commit {commit}{" (modified)" if dirty else ""}'
+        f'## {now:%Y-%m-%d %H:%M UTC}, model of commit {commit}{" (pulsejet_sim/ modified)" if dirty else ""}'
         f'\n\nmachine: {platform.machine()}, {os.cpu_count()} cores, Python'
         f' {platform.python_version()}; command: `benchmarks/valve_seat_probe.py'
         f'{" --code " + str(args.code) if args.code.resolve() != HERE.parent else ""}`;'

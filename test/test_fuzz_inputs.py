@@ -414,7 +414,7 @@ def test_pin_hole_valve_is_rejected_not_simulated(command: Command) -> None:
     loss overflow (cavity pressure NaN in the observation). Such openings are now refused.
     """
     with pytest.raises(
-        CommandError, match=r'valve_opening=.*allowed: 0 \(shut\) or a finite value in \[0.002'
+        CommandError, match=r'valve_opening=.*allowed: 0 \(shut\) or a finite value in \[0.0015'
     ):
         command.validate()
     applied, rejected, _ = check_command_sequence(

@@ -44,8 +44,16 @@ from numba import literally, njit
 import numpy as np
 from pulsejet_sim.models.base import VALVE_MIN_OPENING
 
-# the valve's seat: its opening is 0 or in [VALVE_SEAT, 1] (base.VALVE_MIN_OPENING says why)
-VALVE_SEAT = VALVE_MIN_OPENING
+# the valve's seat: its opening is 0 or in [VALVE_SEAT, 1] (base.VALVE_MIN_OPENING says why).
+# Written out here, not assigned from base: numba freezes it into the cached kernels, and it
+# invalidates a cache entry when the function's own file changes, not base.py (nor, for
+# lumped_batch's kernels, this file: clear pulsejet_sim/models/__pycache__/*.nb[ic] after a change)
+VALVE_SEAT = 1.5e-3
+if VALVE_SEAT != VALVE_MIN_OPENING:
+    raise ImportError(
+        f'lumped_kernels.VALVE_SEAT={VALVE_SEAT} differs from base.VALVE_MIN_OPENING='
+        f'{VALVE_MIN_OPENING}; allowed: the same value (change both)'
+    )
 
 # ---- term bits --------------------------------------------------------------------------------
 T_SHELL_INERTIA = 1 << 0
