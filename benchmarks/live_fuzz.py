@@ -1,7 +1,7 @@
 """
 Live fuzz of sim_node: floods its command topics, services and parameters and counts what breaks.
 
-    .venv/bin/python benchmarks/live_fuzz.py [--seconds 300]
+    .venv/bin/python benchmarks/live_fuzz.py [--seconds 600]
                                              [--scene pump_cycle --scene shell_robot]
                                              [--rate-hz 2000] [--seed 1] [--no-write]
 

@@ -109,8 +109,9 @@ def main(argv=None) -> int:
     from pulsejet_sim.models.base import VALVE_MIN_OPENING
 
     now = datetime.datetime.now(datetime.timezone.utc)
+    modified = ' (pulsejet_sim/ modified)' if dirty else ''
     text = (
-        f'## {now:%Y-%m-%d %H:%M UTC}, model of commit {commit}{" (pulsejet_sim/ modified)" if dirty else ""}'
+        f'## {now:%Y-%m-%d %H:%M UTC}, model of commit {commit}{modified}'
         f'\n\nmachine: {platform.machine()}, {os.cpu_count()} cores, Python'
         f' {platform.python_version()}; command: `benchmarks/valve_seat_probe.py'
         f'{" --code " + str(args.code) if args.code.resolve() != HERE.parent else ""}`;'
