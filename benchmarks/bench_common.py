@@ -36,3 +36,14 @@ def write(name: str, text: str) -> Path:
     print(text)
     print(f'written to {path}')
     return path
+
+
+def append(path: Path, preamble: str, text: str) -> Path:
+    """Append a run's section to a results file (newest last); a new file starts with preamble."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    new = not path.exists()
+    with open(path, 'a') as f:
+        if new:
+            f.write(preamble)
+        f.write(text + '\n')
+    return path

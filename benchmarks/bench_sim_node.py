@@ -33,6 +33,7 @@ import sys
 import time
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from bench_common import append  # noqa: E402
 from live_common import cpu_seconds  # noqa: E402
 import numpy as np  # noqa: E402
 from pulsejet_sim.ros.node_params import ros_value  # noqa: E402
@@ -263,15 +264,12 @@ def main(argv=None) -> int:
     text = header + '\n' + table(r) + '\n'
     print(text)
     if not args.no_write:
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        new = not RESULTS.exists()
-        with open(RESULTS, 'a') as f:
-            if new:
-                f.write(
-                    '# sim_node live benchmarks\n\nProduced by `benchmarks/bench_sim_node.py`;'
-                    ' newest last.\n\n'
-                )
-            f.write(text + '\n')
+        append(
+            RESULTS,
+            '# sim_node live benchmarks\n\nProduced by `benchmarks/bench_sim_node.py`; newest'
+            ' last.\n\n',
+            text,
+        )
         print(f'appended to {RESULTS}')
     return 0
 

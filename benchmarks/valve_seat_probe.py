@@ -25,6 +25,9 @@ import subprocess
 import sys
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from bench_common import append  # noqa: E402
+
 RESULTS = HERE / 'results' / 'valve_seat.md'
 OPENINGS = (1e-9, 1e-6, 1e-4, 3e-4, 1e-3, 1.5e-3, 2e-3, 3e-3, 1e-2, 0.1, 0.5, 1.0)
 FLOWS_M3_S = (0.0, 1e-4, 1e-3, 2.5e-3, 6e-3, 0.02, 0.05)
@@ -121,16 +124,14 @@ def main(argv=None) -> int:
     )
     print(text)
     if not args.no_write:
-        new = not RESULTS.exists()
-        with open(RESULTS, 'a') as f:
-            if new:
-                f.write(
-                    '# Valve openings the lumped model can hold\n\nProduced by'
-                    ' `benchmarks/valve_seat_probe.py`; newest last. A fault is a SimulationBlowUp'
-                    ' (reported, never published as NaN); refused: the command was refused'
-                    ' (CommandError).\n\n'
-                )
-            f.write(text + '\n')
+        append(
+            RESULTS,
+            '# Valve openings the lumped model can hold\n\nProduced by'
+            ' `benchmarks/valve_seat_probe.py`; newest last. A fault is a SimulationBlowUp'
+            ' (reported, never published as NaN); refused: the command was refused'
+            ' (CommandError).\n\n',
+            text,
+        )
     return 0
 
 
