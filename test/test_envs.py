@@ -15,7 +15,7 @@ import pulsejet_sim.envs as E
 from pulsejet_sim.envs.rewards import REWARDS
 from pulsejet_sim.models import lumped_batch as B
 from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import Command
+from pulsejet_sim.models.base import Command, VALVE_MIN_OPENING
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.simulation import Simulation
 import pytest
@@ -252,6 +252,29 @@ def test_vector_env_matches_single_env_and_autoresets():
     assert vtrunc.all()
     vobs, vr, vterm, vtrunc, _ = venv.step(a)  # NEXT_STEP autoreset: back to the initial state
     assert np.array_equal(vobs[0], env.reset()[0]) and np.all(vr == 0.0)
+
+
+def test_a_valve_action_below_the_seat_shuts_the_valve_in_both_envs():
+    # the valve cannot hold an opening below its seat (base.VALVE_MIN_OPENING): a command there is
+    # refused, so an agent's 0.1 % means shut; found by review: the single env raised CommandError
+    # and the vector env flipped the valve between the seat and shut at every step
+    kw = {'initial_b_jitter': 0.0, 'reward': 'distance'}
+    venv = E.LumpedPumpValveVectorEnv(2, exact=True, **kw)
+    env = E.LumpedPumpValveEnv(**kw)
+    venv.reset(seed=0)
+    env.reset(seed=0)
+    a = np.array([[2.5e-3, 1.0], [2.5e-3, 1.0]])
+    for _ in range(2):  # open, then nearly shut
+        vobs, _, _, _, _ = venv.step(a)
+        obs, _, term, _, info = env.step(a[0])
+        assert np.array_equal(vobs[0], obs) and not term
+        a[:, 1] = [1e-3, VALVE_MIN_OPENING / 2]
+    assert info['action_clipped'] and 'fault' not in info
+    for _ in range(4):
+        vobs, _, vterm, _, _ = venv.step(a)
+        obs, _, term, _, _ = env.step(a[0])
+        assert np.array_equal(vobs[0], obs) and not term and not vterm.any()
+    assert obs[5] == 0.0 and np.all(vobs[:, 5] == 0.0)  # shut, and it stays shut
 
 
 def test_shell_robots_in_worker_processes():

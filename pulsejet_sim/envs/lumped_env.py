@@ -3,8 +3,8 @@ One lumped pump/valve robot (paper 001) as a gymnasium environment.
 
 Action (SI, ``Box`` within ``Command.LIMITS``): ``[pump flow command (m^3/s), valve opening command
 (0 shut .. 1 open)]``, held for one control period (``control_period_s``, default 0.05 s, a whole
-number of the scene's physics steps). Out-of-range actions are clipped
-(``info['action_clipped']``).
+number of the scene's physics steps). Out-of-range actions are clipped, and a valve opening below
+the valve's seat (``VALVE_MIN_OPENING``, 0.15 %) shuts it (``info['action_clipped']``).
 
 Observation (SI, ``Box``): ``[vehicle speed U (m/s), minor semi-axis b (m), db/dt (m/s), fluid
 volume in the cavity (m^3), actual pump flow (m^3/s), actual valve opening (0..1)]``.
@@ -29,7 +29,7 @@ from gymnasium import spaces
 import numpy as np
 from pulsejet_sim.envs import rewards as R
 from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import Command, SimulationBlowUp
+from pulsejet_sim.models.base import Command, SimulationBlowUp, VALVE_MIN_OPENING
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.simulation import Simulation
 
@@ -65,6 +65,18 @@ def lumped_spaces(params: np.ndarray) -> tuple[spaces.Box, spaces.Box]:
     )
     high = np.array([params[K.P_U_MAX], params[K.P_B_MAX], np.inf, v_max, q_hi, 1.0])
     return spaces.Box(low, high, dtype=np.float64), action
+
+
+def clip_actions(actions: np.ndarray, space: spaces.Box) -> np.ndarray:
+    """
+    Return actions (..., 2) inside the Box, NaN as 0; a valve opening below the seat shuts it.
+
+    A command refuses an opening between 0 and the valve's seat (base.VALVE_MIN_OPENING), where the
+    lumped model cannot hold the flow; an agent's action there means "nearly shut", so it is shut.
+    """
+    act = np.clip(np.nan_to_num(actions, nan=0.0), space.low, space.high)
+    act[..., 1] = np.where(act[..., 1] < VALVE_MIN_OPENING, 0.0, act[..., 1])
+    return act
 
 
 def lumped_mass_kg(params: np.ndarray) -> float:
@@ -158,7 +170,7 @@ class LumpedPumpValveEnv(gym.Env):
 
     def step(self, action):
         raw = np.asarray(action, dtype=np.float64).reshape(2)
-        act = np.clip(np.nan_to_num(raw, nan=0.0), self.action_space.low, self.action_space.high)
+        act = clip_actions(raw, self.action_space)
         command = Command(float(act[0]), float(act[1]), 0.0)
         y = self.sim.state
         x0, w0 = float(y[K.Y_X]), float(y[K.Y_W_PUMP])

@@ -29,6 +29,7 @@ import numpy as np
 from pulsejet_sim.envs import rewards as R
 from pulsejet_sim.envs.lumped_env import (
     check_b_jitter,
+    clip_actions,
     episode_periods,
     lumped_mass_kg,
     lumped_observation,
@@ -125,11 +126,9 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         return self._obs(), {}
 
     def step(self, actions):
-        act = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2)
-        act = np.clip(
-            np.nan_to_num(act, nan=0.0),
-            self.single_action_space.low,
-            self.single_action_space.high,
+        act = clip_actions(
+            np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2),
+            self.single_action_space,
         )
         restart = np.flatnonzero(self._ended)
         if restart.size:

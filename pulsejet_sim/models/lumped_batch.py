@@ -524,7 +524,7 @@ def _finish(W, h):
         )
         new_valve = new_valve if v_cmd != valve else valve
         # the valve's seat (lumped_kernels._advance): crack open to it, or seal below it
-        below_seat = new_valve > 0.0 and new_valve < K.VALVE_SEAT
+        below_seat = v_cmd != valve and new_valve > 0.0 and new_valve < K.VALVE_SEAT
         new_valve = (K.VALVE_SEAT if v_cmd > valve else 0.0) if below_seat else new_valve
         finite = finite and math.isfinite(new_valve)
         b = W[R_ACC * B + K.Y_B * B + j]
@@ -633,7 +633,7 @@ def _stage_state(W):
             if (v_cmd < valve - stroke and not v_cmd > valve + stroke)
             else new_valve
         )
-        below_seat = new_valve > 0.0 and new_valve < K.VALVE_SEAT
+        below_seat = v_cmd != valve and new_valve > 0.0 and new_valve < K.VALVE_SEAT
         new_valve = (K.VALVE_SEAT if v_cmd > valve else 0.0) if below_seat else new_valve
         seal = v_cmd != valve and new_valve <= 0.0 and 0.0 < valve
         W[R_SEAL * B + j] = 1.0 if seal else 0.0

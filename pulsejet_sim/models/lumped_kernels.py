@@ -444,6 +444,37 @@ def stored_energy(flags, y, p):
 
 
 @njit(cache=True, nogil=True)
+def _seal(flags, y, p):
+    """
+    Seal a moving flow at the valve: the water in the nozzle stops, the shell follows the pump.
+
+    An impulsive constraint: the cavity pressure impulse Pi that brings the shell from b' to the
+    pump's rate b'+ = Q_p / V_b (m_s (b'+ - b') = V_b Pi, m_s the shell's b-mode mass without the
+    nozzle water) is also what the pump pushes its flow against, so the pump does the work
+    Pi Q_p = m_s (b'+ - b') b'+ (booked as pump work, the input that pays for it), and the valve
+    takes the rest of the change, 1/2 m_s (b'+ - b')^2 + 1/2 Lambda Q_n^2 >= 0 (the nozzle water's
+    kinetic energy and the shell's inelastic jump). Their sum is the change of the stored energy.
+    """
+    m_s = 0.0
+    if flags & T_SHELL_INERTIA:
+        m_s += p[P_I_B]
+    if flags & T_INTERNAL_ADDED_MASS:
+        m_s += p[P_M_B]
+    inertance = 0.0
+    if flags & T_NOZZLE_INERTIA:
+        inertance = p[P_RHO] * p[P_L_N] / p[P_A_N]
+    v_b = 8.0 / 3.0 * math.pi * p[P_A] * y[Y_B]
+    w_before = y[Y_W]
+    q_n = y[Y_QP] - v_b * w_before
+    w_after = y[Y_QP] / v_b
+    jump = w_after - w_before
+    y[Y_VALVE] = 0.0
+    y[Y_W] = w_after
+    y[Y_W_PUMP] += m_s * jump * w_after
+    y[Y_E_VALVE] += 0.5 * m_s * jump * jump + 0.5 * inertance * q_n * q_n
+
+
+@njit(cache=True, nogil=True)
 def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
     """
     Advance y by n_steps fixed steps of dt.
@@ -487,13 +518,7 @@ def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
                 # it cracks open to its seat, or seals when closing would pass below it
                 new_valve = VALVE_SEAT if valve_cmd > valve else 0.0
             if new_valve <= 0.0 < valve:
-                # sealing a moving flow: the water in the nozzle stops and the shell follows the
-                # pump; the kinetic energy this removes is lost in the valve
-                e_before = stored_energy(flags, y, p)
-                y[Y_VALVE] = 0.0
-                y[Y_W] = y[Y_QP] / (8.0 / 3.0 * math.pi * p[P_A] * y[Y_B])
-                e_after = stored_energy(flags, y, p)
-                y[Y_E_VALVE] += e_before[3] - e_after[3]
+                _seal(flags, y, p)  # sealing a moving flow
             else:
                 y[Y_VALVE] = new_valve
         status = _check(y, p)
@@ -612,20 +637,6 @@ S_REJECTED = 1
 S_RHS = 2
 S_T_DONE = 3  # time reached (s, from the call's start); < duration only on a fault
 NSTATS = 4
-
-
-@njit(cache=True, nogil=True)
-def _seal(flags, y, p):
-    """
-    Seal a moving flow at the valve: the water in the nozzle stops, the shell follows the pump.
-
-    The kinetic energy this removes is booked as valve loss (as in the fixed-step path).
-    """
-    e_before = stored_energy(flags, y, p)
-    y[Y_VALVE] = 0.0
-    y[Y_W] = y[Y_QP] / (8.0 / 3.0 * math.pi * p[P_A] * y[Y_B])
-    e_after = stored_energy(flags, y, p)
-    y[Y_E_VALVE] += e_before[3] - e_after[3]
 
 
 @njit(cache=True, nogil=True)
@@ -862,8 +873,9 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
         v0 = valve_cmd
     if valve_cmd != v0:
         rate = p[P_VALVE_RATE]
-        # a valve closing to 0 seals when it reaches its seat
-        ramp_end = valve_cmd if valve_cmd > 0.0 else VALVE_SEAT
+        # a valve closing to 0 seals when it reaches its seat (at once from below it: a state set
+        # from outside, as the fixed step does after its step)
+        ramp_end = valve_cmd if valve_cmd > 0.0 else min(VALVE_SEAT, v0)
         t_ramp = abs(ramp_end - v0) / rate
         if abs(t_ramp - duration) <= 1e-12 * duration:
             t_ramp = duration  # the ramp ends with the call (round-off of the stroke arithmetic)
