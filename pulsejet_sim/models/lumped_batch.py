@@ -593,15 +593,7 @@ def _load_terms(flags, W, P, start, n):
     for j in range(B):
         i = start + j if start + j < n else start
         p = P[i]
-        rho = p[K.P_RHO]
-        m_shell = 0.0
-        if flags & K.T_SHELL_INERTIA:
-            m_shell += p[K.P_I_B]
-        if flags & K.T_INTERNAL_ADDED_MASS:
-            m_shell += p[K.P_M_B]
-        inertance = 0.0
-        if flags & K.T_NOZZLE_INERTIA:
-            inertance = rho * p[K.P_L_N] / p[K.P_A_N]
+        m_shell, inertance = K.shell_inertia(flags, p)
         d_n = p[K.P_D_N]
         W[R_M_SHELL * B + j] = m_shell
         W[R_INERTANCE * B + j] = inertance

@@ -187,6 +187,25 @@ def fluid_stiffness_force(b, u, p):
     return force, k_x
 
 
+@njit(cache=True, nogil=True, inline='always')
+def shell_inertia(flags, p):
+    """
+    Return the b mode's mass without the nozzle water, I_b + m_b (kg), and Lambda (kg/m^4).
+
+    Lambda = rho L_n / A_n is the nozzle inertance (m_l = Lambda V_b^2 is added where the flow
+    decides it); each is 0 when its term is off.
+    """
+    m_shell = 0.0
+    if flags & T_SHELL_INERTIA:
+        m_shell += p[P_I_B]
+    if flags & T_INTERNAL_ADDED_MASS:
+        m_shell += p[P_M_B]
+    inertance = 0.0
+    if flags & T_NOZZLE_INERTIA:
+        inertance = p[P_RHO] * p[P_L_N] / p[P_A_N]
+    return m_shell, inertance
+
+
 @njit(cache=True, nogil=True)
 def rhs(flags, y, valve, q_cmd, p, dy, diag):
     """
@@ -218,14 +237,7 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     a_n = p[P_A_N]
 
     # shell inertia of the b mode (the nozzle part depends on the flow and is added below)
-    m_shell = 0.0
-    if flags & T_SHELL_INERTIA:
-        m_shell += p[P_I_B]
-    if flags & T_INTERNAL_ADDED_MASS:
-        m_shell += p[P_M_B]
-    inertance = 0.0
-    if flags & T_NOZZLE_INERTIA:
-        inertance = rho * p[P_L_N] / a_n
+    m_shell, inertance = shell_inertia(flags, p)
     m_l = inertance * v_b * v_b
 
     # outer flow
@@ -430,11 +442,7 @@ def stored_energy(flags, y, p):
     m_x = 0.0
     if flags & T_ADDED_MASS:
         m_x, _ = added_mass(flags, b, p)
-    m_shell = 0.0
-    if flags & T_SHELL_INERTIA:
-        m_shell += p[P_I_B]
-    if flags & T_INTERNAL_ADDED_MASS:
-        m_shell += p[P_M_B]
+    m_shell, _ = shell_inertia(flags, p)
     internal = 0.5 * m_shell * w * w
     if flags & T_NOZZLE_INERTIA:
         if y[Y_VALVE] > 0.0:
@@ -455,14 +463,7 @@ def _seal(flags, y, p):
     takes the rest of the change, 1/2 m_s (b'+ - b')^2 + 1/2 Lambda Q_n^2 >= 0 (the nozzle water's
     kinetic energy and the shell's inelastic jump). Their sum is the change of the stored energy.
     """
-    m_s = 0.0
-    if flags & T_SHELL_INERTIA:
-        m_s += p[P_I_B]
-    if flags & T_INTERNAL_ADDED_MASS:
-        m_s += p[P_M_B]
-    inertance = 0.0
-    if flags & T_NOZZLE_INERTIA:
-        inertance = p[P_RHO] * p[P_L_N] / p[P_A_N]
+    m_s, inertance = shell_inertia(flags, p)
     v_b = 8.0 / 3.0 * math.pi * p[P_A] * y[Y_B]
     w_before = y[Y_W]
     q_n = y[Y_QP] - v_b * w_before
