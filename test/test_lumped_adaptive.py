@@ -113,10 +113,10 @@ def test_sealing_with_the_pump_on_books_the_pump_work_and_a_valve_loss(overrides
     The valve loss never decreases: sealing with the pump running is paid for by the pump.
 
     Sealing brings the shell to the pump's rate in one jump. The jump's change of kinetic energy
-    was booked whole as valve loss, which came out negative when the pump started as the valve closed
-    (pump_cycle's routine: -1.8e-4 J at the end of the jet; found by review): the pump's impulsive
-    work, which pays for the shell's speed-up, was booked as energy the valve creates. It now goes
-    to the pump's work and the valve loss is >= 0 at every step.
+    was booked whole as valve loss, which came out negative when the pump started as the valve
+    closed (pump_cycle's routine: -1.8e-4 J at the end of the jet; found by review): the pump's
+    impulsive work, which pays for the shell's speed-up, was booked as energy the valve creates. It
+    now goes to the pump's work and the valve loss is >= 0 at every step.
     """
     model = load_scene('pump_cycle', overrides).model
     sim = Simulation(model)
