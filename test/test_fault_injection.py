@@ -105,4 +105,9 @@ def test_a_restarted_sim_node_is_picked_up_by_the_controller_and_the_recorder(
     assert 'restarting the routine' in ctrl_log, ctrl_log[-2000:]
     clock = [m.clock.sec + 1e-9 * m.clock.nanosec for m in read_all(out)['/clock']]
     drop = max(range(1, len(clock)), key=lambda i: clock[i - 1] - clock[i])
-    assert clock[drop - 1] > 1.0 and clock[drop] < 0.2  # the first run, then the second from 0
+    # the first run, then the second from 0 (failed once in a fresh clone, unloaded, 2026-12-02:
+    # the largest drop was from 0.15 s; the message shows the recorded clock around it)
+    assert clock[drop - 1] > 1.0 and clock[drop] < 0.2, (
+        f'largest drop at message {drop} of {len(clock)}: {clock[max(0, drop - 5) : drop + 5]};'
+        f' recorded clock from {clock[0]} to max {max(clock)}'
+    )
