@@ -494,6 +494,24 @@ def _stage(flags, W, stage, h, dt):
     return n_slow
 
 
+@njit(cache=True, inline='always', error_model='numpy')
+def _valve_after_step(valve, v_cmd, stroke):
+    """
+    Return the valve's opening after a step (lumped_kernels._advance's stroke and seat).
+
+    It moves by at most `stroke` towards the command; an opening below the seat becomes the seat
+    (opening) or 0 (closing: it seals).
+    """
+    new_valve = v_cmd
+    new_valve = valve + stroke if v_cmd > valve + stroke else new_valve
+    new_valve = (
+        valve - stroke if (v_cmd < valve - stroke and not v_cmd > valve + stroke) else new_valve
+    )
+    new_valve = new_valve if v_cmd != valve else valve
+    below_seat = v_cmd != valve and new_valve > 0.0 and new_valve < K.VALVE_SEAT
+    return (K.VALVE_SEAT if v_cmd > valve else 0.0) if below_seat else new_valve
+
+
 @njit(cache=True, error_model='numpy')
 def _finish(W, h):
     """
@@ -513,19 +531,7 @@ def _finish(W, h):
             W[(R_ACC + c) * B + j] = y_new
             finite = finite and math.isfinite(y_new)
         valve = W[(R_Y + K.Y_VALVE) * B + j]
-        v_cmd = W[R_V * B + j]
-        stroke = W[R_STROKE * B + j]
-        new_valve = v_cmd
-        new_valve = valve + stroke if v_cmd > valve + stroke else new_valve
-        new_valve = (
-            valve - stroke
-            if (v_cmd < valve - stroke and not v_cmd > valve + stroke)
-            else new_valve
-        )
-        new_valve = new_valve if v_cmd != valve else valve
-        # the valve's seat (lumped_kernels._advance): crack open to it, or seal below it
-        below_seat = v_cmd != valve and new_valve > 0.0 and new_valve < K.VALVE_SEAT
-        new_valve = (K.VALVE_SEAT if v_cmd > valve else 0.0) if below_seat else new_valve
+        new_valve = _valve_after_step(valve, W[R_V * B + j], W[R_STROKE * B + j])
         finite = finite and math.isfinite(new_valve)
         b = W[R_ACC * B + K.Y_B * B + j]
         u = W[R_ACC * B + K.Y_U * B + j]
@@ -617,16 +623,7 @@ def _stage_state(W):
         valve = W[(R_Y + K.Y_VALVE) * B + j]
         W[R_CONTRACTION * B + j] = 1.0 / valve - 1.0
         v_cmd = W[R_V * B + j]
-        stroke = W[R_STROKE * B + j]
-        new_valve = v_cmd
-        new_valve = valve + stroke if v_cmd > valve + stroke else new_valve
-        new_valve = (
-            valve - stroke
-            if (v_cmd < valve - stroke and not v_cmd > valve + stroke)
-            else new_valve
-        )
-        below_seat = v_cmd != valve and new_valve > 0.0 and new_valve < K.VALVE_SEAT
-        new_valve = (K.VALVE_SEAT if v_cmd > valve else 0.0) if below_seat else new_valve
+        new_valve = _valve_after_step(valve, v_cmd, W[R_STROKE * B + j])
         seal = v_cmd != valve and new_valve <= 0.0 and 0.0 < valve
         W[R_SEAL * B + j] = 1.0 if seal else 0.0
 

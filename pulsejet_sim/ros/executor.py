@@ -21,7 +21,7 @@ sim_node keeps the single-threaded executor: it serves events in arrival order, 
 of commands beyond the node's capacity (benchmarks/live_fuzz.py, 1.9 kHz of commands into the
 shell scene) a parameter or service request waited behind every queued message event: parameter
 dumps took up to 21 s (4 of 125 over 10 s; benchmarks/results/live_fuzz_events_executor.md),
-against at most 0.61 s with the single-threaded executor (live_fuzz.md), whose wait set takes each
+against at most 0.63 s with the single-threaded executor (live_fuzz.md), whose wait set takes each
 ready entity in turn. sim_node takes only commands (50-1000 a
 second in normal use), so the events executor's saving there is small; the controller and the
 recorder, which take the 1 kHz state, keep it.
