@@ -3,10 +3,11 @@ Benchmark (not a test): robot-steps per second of the vector environments.
 
 Lumped: LumpedPumpValveVectorEnv (one numba call per control period advances all N robots) for
 N = 1, 64, 1024, 16384, pump_cycle scene, dt = 1e-4 s, RK4, pump on with the valve shut then
-jetting, with the vectorised atanh (exact=False, the default) and with libm's (exact=True, bit for
-bit the single-robot env); a robot-step is one physics step (dt) of one robot; real-time factor =
-simulated robot-seconds per wall second, per core (one process, one thread: the kernel has no
-parallel loops).
+jetting: the default (vectorised atanh, exact=False; state and pump work, losses=False), the same
+with the energy ledger's losses (losses=True), and libm's atanh with the losses (exact=True, bit
+for bit the single-robot env); a robot-step is one physics step (dt) of one robot; real-time
+factor = simulated robot-seconds per wall second, per core (one process, one thread: the kernel
+has no parallel loops).
 Wall and CPU (process) time are both given: the machine is shared, and the CPU time is the better
 measure of a loaded run. Shell: ShellCableEnv in an AsyncVectorEnv with N worker processes
 (shell_robot, dt = 1e-2 s). Writes benchmarks/results/envs.md, keeping the previous run's table
@@ -31,7 +32,9 @@ import numpy as np  # noqa: E402
 from pulsejet_sim.envs import LumpedPumpValveVectorEnv, make_shell_vector_env  # noqa: E402
 
 
-def bench_lumped(n: int, robot_steps: float, exact: bool = False, repeats: int = 5):
+def bench_lumped(
+    n: int, robot_steps: float, exact: bool = False, repeats: int = 5, losses: bool = False
+):
     """
     Time `repeats` runs of `robot_steps` robot-steps each (after a warm-up call).
 
@@ -40,7 +43,9 @@ def bench_lumped(n: int, robot_steps: float, exact: bool = False, repeats: int =
     runs are other jobs interfering), the median shows the spread.
     """
     period = 0.01
-    env = LumpedPumpValveVectorEnv(n, control_period_s=period, max_episode_s=1e6, exact=exact)
+    env = LumpedPumpValveVectorEnv(
+        n, control_period_s=period, max_episode_s=1e6, exact=exact, losses=losses
+    )
     env.reset(seed=0)
     inflate = np.tile([2.5e-3, 0.0], (n, 1))
     jet = np.tile([0.0, 1.0], (n, 1))
@@ -85,10 +90,14 @@ def main() -> int:
     previous = (RESULTS / 'envs.md').read_text() if (RESULTS / 'envs.md').exists() else ''
     load_before = os.getloadavg()
     rows = []
-    for exact in (False, True):
-        kind = 'libm atanh, bit for bit single env' if exact else 'vectorised atanh (default)'
+    cases = (
+        (False, False, 'vectorised atanh, state and pump work (default)'),
+        (False, True, 'vectorised atanh, with the ledger losses (losses=True)'),
+        (True, True, 'libm atanh, with the ledger losses, bit for bit single env'),
+    )
+    for exact, losses, kind in cases:
         for n in (1, 64, 1024, 16384):
-            best, median = bench_lumped(n, args.robot_steps, exact, args.repeats)
+            best, median = bench_lumped(n, args.robot_steps, exact, args.repeats, losses)
             sps, rtf, calls, wall, cpu, sps_cpu = best
             rows.append(
                 f'| lumped, vector env, {kind} | {n} | {calls} x 100 steps | {wall:.2f} | '

@@ -113,15 +113,19 @@ def test_batch_kernel_equals_single_robot_runs_bit_for_bit():
     assert not np.array_equal(Y[0], Y[3]) and not np.array_equal(Y[2], Y[3])
 
 
-def _batch_against_single(scene, overrides, n, exact, calls=10, steps=300, fault_phase=False):
+def _batch_against_single(
+    scene, overrides, n, exact, calls=10, steps=300, fault_phase=False, losses_off=False
+):
     """
     Run n robots through the batch kernel and each robot through the single-robot kernel.
 
     The robots have per-robot stiffness and b(0) and get random commands that seal, throttle and
     open the valve. Returns (batch states, single states, batch done/status, single done/status,
-    component scales).
+    component scales). losses_off: the batch kernel runs with lumped_batch.LOSSES_OFF (the loss
+    components are then compared with their initial values, not the single-robot ones).
     """
     model = load_scene(scene, overrides).model
+    flags = model.flags | (B.LOSSES_OFF if losses_off else 0)
     rng = np.random.default_rng(5)
     Y = np.tile(model.initial_state(), (n, 1))
     Y[:, K.Y_B] *= 1.0 + rng.uniform(-0.02, 0.02, n)
@@ -133,7 +137,7 @@ def _batch_against_single(scene, overrides, n, exact, calls=10, steps=300, fault
     Ys = Y.copy()
     done, status = np.zeros(n, np.int64), np.zeros(n, np.int64)
     done_s, status_s = np.zeros(n, np.int64), np.zeros(n, np.int64)
-    kernel = B.batch_kernel(model.flags, exact)
+    kernel = B.batch_kernel(flags, exact)
     single = K.specialised(
         K.advance, model.flags, model.initial_state(), model.params, 0.0, 0.0, 0, model.dt_s
     )
@@ -146,7 +150,7 @@ def _batch_against_single(scene, overrides, n, exact, calls=10, steps=300, fault
             # 0.005: RK4 sub-steps; 1 -> 0: the valve seals; 0.30001 and 0.0021 -> 0: its stroke
             # would pass below the valve's seat, where it seals
             v = rng.choice([0.0, 0.005, 0.3, 1.0, 0.30001, 0.0021], n)
-        kernel(model.flags, Y, P, q, v, steps, model.dt_s, done, status)
+        kernel(flags, Y, P, q, v, steps, model.dt_s, done, status)
         for i in range(n):
             if status_s[i] == K.OK:
                 done_s[i], status_s[i] = single(
@@ -196,6 +200,22 @@ def test_vector_batch_kernel_fast_atanh_within_tolerance():
     assert np.all(np.abs(Y - Ys) <= 1e-12 * scale)
 
 
+def test_vector_batch_kernel_without_the_losses_keeps_state_and_pump_work():
+    # LOSSES_OFF (the vector env's default) integrates the state and the pump's work only: they
+    # are those of the single-robot runs within the fast path's rounding, also through the steps
+    # _slow_steps hands to the single-robot kernel (which integrates the losses: dropped); the loss
+    # components keep the caller's values
+    Y, Ys, status, status_s, scale = _batch_against_single(
+        'pump_cycle', None, 100, False, losses_off=True
+    )
+    assert np.array_equal(status, status_s) and np.all(status == K.OK)
+    kept = list(range(B.N_LOSSES_OFF)) + [K.Y_VALVE]
+    assert np.all(np.abs(Y[:, kept] - Ys[:, kept]) <= 1e-12 * scale[kept])
+    losses = slice(B.N_LOSSES_OFF, K.N_INTEGRATED)
+    assert np.all(Y[:, losses] == 0.0)  # the initial state's zeros
+    assert np.all(np.abs(Ys[:, K.Y_E_VALVE]) > 0.0)  # the single-robot runs did lose energy
+
+
 def test_vector_fast_atanh_accuracy():
     rng = np.random.default_rng(0)
     x = np.concatenate(
@@ -240,7 +260,7 @@ def test_vector_env_16384_robots_one_call():
 
 def test_vector_env_matches_single_env_and_autoresets():
     kw = {'initial_b_jitter': 0.0, 'max_episode_s': 0.15, 'reward': 'distance'}
-    venv = E.LumpedPumpValveVectorEnv(2, exact=True, **kw)
+    venv = E.LumpedPumpValveVectorEnv(2, exact=True, losses=True, **kw)
     env = E.LumpedPumpValveEnv(**kw)
     vobs, _ = venv.reset(seed=0)
     obs, _ = env.reset(seed=0)
@@ -259,7 +279,7 @@ def test_a_valve_action_below_the_seat_shuts_the_valve_in_both_envs():
     # refused, so an agent's 0.1 % means shut; found by review: the single env raised CommandError
     # and the vector env flipped the valve between the seat and shut at every step
     kw = {'initial_b_jitter': 0.0, 'reward': 'distance'}
-    venv = E.LumpedPumpValveVectorEnv(2, exact=True, **kw)
+    venv = E.LumpedPumpValveVectorEnv(2, exact=True, losses=True, **kw)
     env = E.LumpedPumpValveEnv(**kw)
     venv.reset(seed=0)
     env.reset(seed=0)

@@ -10,7 +10,10 @@ one scene's parameters (``params`` may give one row per robot instead, shape
 (N, lumped_kernels.NP)). ``exact``: False (default) uses the vectorised atanh of Lamb's added mass
 and LLVM's reciprocal and fused multiply-add rewrites (each about an ulp; trajectories agree with
 LumpedPumpValveEnv to 1e-12 of each component's scale), True libm's (bit for bit
-LumpedPumpValveEnv, 25-45 % fewer robot-steps/s).
+LumpedPumpValveEnv, tested with losses=True; 43-54 % fewer robot-steps/s than the default).
+``losses``: False (default) integrates the state and the pump's work only (``info`` and the
+rewards need no more; ``lumped_batch.LOSSES_OFF``, 8-22 % more robot-steps/s), True also the
+energy ledger's losses in ``env.Y`` (lumped_kernels.Y_E_JET..Y_C_RAM; they stay 0 otherwise).
 Autoreset: gymnasium's ``NEXT_STEP`` mode: the step after a robot's episode ended resets that robot
 (its action is ignored, reward 0); ``info['fault']`` holds the robots' fault codes
 (lumped_kernels.ERR_*, 0: none). Only the fixed-step RK4 integrator (the scene's ``dt_s``) runs in
@@ -58,6 +61,7 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         cot_min_distance_m: float = 0.01,
         params: np.ndarray | None = None,
         exact: bool = False,
+        losses: bool = False,
     ):
         if int(num_envs) < 1:
             raise ValueError(f'num_envs={num_envs!r} rejected; allowed: an integer >= 1')
@@ -97,7 +101,9 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         self.status = np.zeros(n, np.int64)
         self.done = np.zeros(n, np.int64)
         self._ended = np.zeros(n, bool)
-        self._kernel = B.batch_kernel(self.model.flags, self.exact)
+        self.losses = bool(losses)
+        self._flags = self.model.flags | (0 if self.losses else B.LOSSES_OFF)
+        self._kernel = B.batch_kernel(self._flags, self.exact)
         self._rng, _ = seeding.np_random(None)
 
     def _reset_rows(self, rows: np.ndarray) -> None:
@@ -140,7 +146,7 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         if restart.size:
             self.status[restart] = -1  # just reset: not advanced this call (NEXT_STEP autoreset)
         self._kernel(
-            self.model.flags,
+            self._flags,
             self.Y,
             self.P,
             q,

@@ -40,6 +40,13 @@ single-robot step; rare). A robot whose step fails keeps its last good state, ge
 
 Arrays: states ``Y`` (N, NY) and parameters ``P`` (N, NP), C-contiguous, one row per robot;
 commands ``q_cmd`` and ``valve_cmd`` (N,).
+
+``flags | LOSSES_OFF`` integrates the state and the pump's work only, not the ledger's loss and
+correction integrals: they feed nothing back, and a learner's rewards (distance, speed, cost of
+transport) need none of them. LLVM then drops their expressions: 8-22 % more robot-steps/s
+(benchmarks/results/envs.md, N >= 64).
+The state and the pump's work agree with the single-robot runs as above (the fast path tested to
+1e-12 of each component's scale); the loss components keep the caller's values.
 """
 
 from __future__ import annotations
@@ -59,6 +66,11 @@ from pulsejet_sim.models import lumped_kernels as K
 # 'nnan'/'ninf' (the step's finiteness check must see nan and inf) nor 'reassoc'/'afn' (they
 # would undo fdlibm's compensated sums in _atanh_fast).
 FAST_MATH = {'arcp', 'contract', 'nsz'}
+# a bit of the batch kernel's literal flags, above lumped_kernels' bits (which ignore it):
+# integrate the state and the pump's work only, not the ledger's losses and corrections
+# (Y_E_JET..Y_C_RAM), which nothing in the state depends on; they keep the caller's values
+LOSSES_OFF = 1 << 30
+N_LOSSES_OFF = K.Y_W_PUMP + 1  # components integrated with LOSSES_OFF
 BLOCK = 64  # robots per block (a multiple of the SIMD width; the block's rows stay in L1/L2)
 # a last block with fewer robots runs them one at a time (lumped_kernels._advance)
 SCALAR_BELOW = 16
@@ -477,16 +489,17 @@ def _stage(flags, W, stage, h, dt):
         _acc(W, j, 3, stage, d3)
         _acc(W, j, 4, stage, d4)
         _acc(W, j, 5, stage, d5)
-        _acc(W, j, 6, stage, d6)
-        _acc(W, j, 7, stage, d7)
-        _acc(W, j, 8, stage, d8)
-        _acc(W, j, 9, stage, d9)
-        _acc(W, j, 10, stage, d10)
-        _acc(W, j, 11, stage, d11)
-        _acc(W, j, 12, stage, d12)
-        _acc(W, j, 13, stage, d13)
-        _acc(W, j, 14, stage, d14)
-        _acc(W, j, 15, stage, d15)
+        if not flags & LOSSES_OFF:
+            _acc(W, j, 6, stage, d6)
+            _acc(W, j, 7, stage, d7)
+            _acc(W, j, 8, stage, d8)
+            _acc(W, j, 9, stage, d9)
+            _acc(W, j, 10, stage, d10)
+            _acc(W, j, 11, stage, d11)
+            _acc(W, j, 12, stage, d12)
+            _acc(W, j, 13, stage, d13)
+            _acc(W, j, 14, stage, d14)
+            _acc(W, j, 15, stage, d15)
         _next(W, j, R_TU, K.Y_U, stage, half, h, d1)
         _next(W, j, R_TB, K.Y_B, stage, half, h, d2)
         _next(W, j, R_TW, K.Y_W, stage, half, h, d3)
@@ -513,7 +526,7 @@ def _valve_after_step(valve, v_cmd, stroke):
 
 
 @njit(cache=True, error_model='numpy')
-def _finish(W, h):
+def _finish(flags, W, h):
     """
     Finish the step: new state y + h/6 (k1 + 2 k2 + 2 k3 + k4), the valve's stroke, the check.
 
@@ -522,11 +535,12 @@ def _finish(W, h):
     """
     B = BLOCK
     h6 = h / 6.0
+    n_int = N_LOSSES_OFF if flags & LOSSES_OFF else K.N_INTEGRATED
     n_active = 0
     for j in range(B):
         active = W[R_ACTIVE * B + j] > 0.0 and W[R_SLOW * B + j] == 0.0
         finite = True
-        for c in range(K.N_INTEGRATED):
+        for c in range(n_int):
             y_new = W[(R_Y + c) * B + j] + h6 * W[(R_ACC + c) * B + j]
             W[(R_ACC + c) * B + j] = y_new
             finite = finite and math.isfinite(y_new)
@@ -541,7 +555,7 @@ def _finish(W, h):
         code = float(K.ERR_B_LOW) if b <= W[R_B_MIN * B + j] else code
         code = code if finite else float(K.ERR_NONFINITE)
         commit = active and code == float(K.OK)
-        for c in range(K.N_INTEGRATED):
+        for c in range(n_int):
             W[(R_Y + c) * B + j] = W[(R_ACC + c) * B + j] if commit else W[(R_Y + c) * B + j]
         W[(R_Y + K.Y_VALVE) * B + j] = new_valve if commit else valve
         W[R_DONE * B + j] += 1.0 if commit else 0.0
@@ -666,7 +680,12 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
                 if status[i] != K.OK:
                     done[i] = 0
                     continue
+                for c in range(N_LOSSES_OFF, K.N_INTEGRATED):
+                    row[c] = Y[i, c]
                 d, s = K._advance(flags, Y[i], P[i], q_cmd[i], valve_cmd[i], n_steps, dt)
+                if flags & LOSSES_OFF:
+                    for c in range(N_LOSSES_OFF, K.N_INTEGRATED):
+                        Y[i, c] = row[c]
                 done[i] = d
                 status[i] = s
             break
@@ -700,13 +719,15 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
             # discarded)
             if n_slow > 0:
                 _slow_steps(flags, W, P, start, n, dt, row)
-            n_active = _finish(W, h)
+            n_active = _finish(flags, W, h)
         for j in range(B):
             i = start + j
             if i >= n:
                 break
             for c in range(K.NY):
-                Y[i, c] = W[(R_Y + c) * B + j]
+                # LOSSES_OFF: the losses the single-robot steps of _slow_steps added are dropped
+                if not (flags & LOSSES_OFF and N_LOSSES_OFF <= c < K.N_INTEGRATED):
+                    Y[i, c] = W[(R_Y + c) * B + j]
             done[i] = int(W[R_DONE * B + j])
             status[i] = int(W[R_STATUS * B + j])
 
