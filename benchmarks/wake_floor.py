@@ -1,7 +1,8 @@
 """
 The machine's own timing floor: how late a process that does nothing but wake on a grid wakes.
 
-    .venv/bin/python benchmarks/wake_floor.py [--seconds 60] [--rate-hz 100]
+    .venv/bin/python benchmarks/wake_floor.py [--seconds 60] [--rate-hz 100] [--spin-ms 0]
+    .venv/bin/python benchmarks/wake_floor.py --table [--seconds 30]
 
 A Python loop sleeps to absolute deadlines k / rate (time.sleep to the next deadline, monotonic
 clock) and records when it woke. It prints one JSON line: the wake-up lateness and the period
@@ -10,18 +11,23 @@ p50 / p99 / max in ms. Run beside a live benchmark it shows what the machine alo
 publication period jitter can be no better than the scheduling jitter of an idle process on the
 same cores (hypervisor steal, other jobs, the kernel's timer slack). bench_sim_node.py and
 bench_hil.py start it for their measured window. Not a test.
+
+--spin-ms: sleep to each deadline less this much, then busy-wait to it (a process that spends a
+core to wake on time: what is left is the machine's own stalls). --table: the sleeper and the
+spinner, each alone, at 100 Hz and 1 kHz; writes benchmarks/results/wake_floor.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 import subprocess
 import sys
 import time
 
 
-def measure(seconds: float, rate_hz: float) -> dict:
+def measure(seconds: float, rate_hz: float, spin_s: float = 0.0) -> dict:
     period = 1.0 / rate_hz
     woke = []
     start = time.monotonic()
@@ -30,9 +36,11 @@ def measure(seconds: float, rate_hz: float) -> dict:
         deadline = start + k * period
         if deadline - start > seconds:
             break
-        delay = deadline - time.monotonic()
+        delay = deadline - spin_s - time.monotonic()
         if delay > 0:
             time.sleep(delay)
+        while time.monotonic() < deadline:
+            pass
         woke.append((deadline, time.monotonic()))
         k += 1
     import numpy as np
@@ -46,6 +54,7 @@ def measure(seconds: float, rate_hz: float) -> dict:
 
     return {
         'rate_hz': rate_hz,
+        'spin_ms': spin_s * 1e3,
         'wakeups': int(times.size),
         'lateness_p50_ms': ms(lateness, 50),
         'lateness_p99_ms': ms(lateness, 99),
@@ -74,14 +83,53 @@ def result(proc: subprocess.Popen, timeout_s: float = 30.0) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
+def table(seconds: float) -> str:
+    """Return the sleeper and the spinner (1 kHz: it spins the whole period), each alone."""
+    import os
+
+    cases = [(100.0, 0.0), (100.0, 0.003), (1000.0, 0.0), (1000.0, 0.001)]
+    load_before = os.getloadavg()[0]
+    rows = []
+    for rate, spin in cases:
+        r = measure(seconds, rate, spin)
+        rows.append(
+            f"| {rate:g} Hz | {'sleep' if spin == 0 else f'sleep, then spin {spin * 1e3:g} ms'} |"
+            f" {r['wakeups']} | {r['lateness_p50_ms']:.3f} / {r['lateness_p99_ms']:.3f} /"
+            f" {r['lateness_max_ms']:.2f} | {r['jitter_p50_ms']:.3f} / {r['jitter_p99_ms']:.3f} /"
+            f" {r['jitter_max_ms']:.2f} |"
+        )
+    return (
+        f'{seconds:g} s per case, one case at a time; load average (1 min) before'
+        f' {load_before:.2f}, after {os.getloadavg()[0]:.2f}.\n\n'
+        '| rate | wait | wake-ups | lateness p50 / p99 / max, ms | period jitter p50 / p99 / max,'
+        ' ms |\n|---|---|---:|---:|---:|\n' + '\n'.join(rows) + '\n'
+    )
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
     ap.add_argument('--seconds', type=float, default=60.0)
     ap.add_argument('--rate-hz', type=float, default=100.0)
+    ap.add_argument('--spin-ms', type=float, default=0.0, help='busy-wait the last ms of a period')
+    ap.add_argument('--table', action='store_true', help='write benchmarks/results/wake_floor.md')
     args = ap.parse_args(argv)
-    if not (args.seconds > 0 and args.rate_hz > 0):
-        ap.error(f'--seconds {args.seconds} and --rate-hz {args.rate_hz} must both be > 0')
-    print(json.dumps(measure(args.seconds, args.rate_hz)))
+    if not (args.seconds > 0 and args.rate_hz > 0 and 0 <= args.spin_ms * args.rate_hz <= 1e3):
+        ap.error(
+            f'--seconds {args.seconds} and --rate-hz {args.rate_hz} must both be > 0 and'
+            f' --spin-ms {args.spin_ms} between 0 and the period'
+        )
+    if args.table:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from bench_common import header, write
+
+        command = ' '.join(['python benchmarks/wake_floor.py'] + sys.argv[1:])
+        write(
+            'wake_floor',
+            header("The machine's timing floor: a process that only waits for a grid", command)
+            + table(args.seconds),
+        )
+        return 0
+    print(json.dumps(measure(args.seconds, args.rate_hz, args.spin_ms * 1e-3)))
     return 0
 
 
