@@ -77,12 +77,12 @@ def test_a_restarted_sim_node_is_picked_up_by_the_controller_and_the_recorder(
         try:
             h.spin_until(lambda: h.time_s > 1.0, 60.0, 'the first run to pass 1 s')
             # ... in the recording too, before the kill. Once (fresh clone, 2026-12-02) the
-            # recording held the first run only to 0.15 s although the harness had seen 1.0 s. Not
-            # reproduced since; a likely cause: a reliable reader delivers in order, so a sample
-            # lost on the way holds every later one until the writer repairs it (Fast DDS: on a
-            # heartbeat, periodic every 3 s by default), and a writer killed first never does.
-            # If the recorder itself stalls, this wait fails and says so. At 100 Hz of /clock from
-            # t >= 0 (t = 0 at most twice), 105 messages reach past 1.0 s.
+            # recorded clock fell back from 0.15 s although the harness had seen 1.0 s; not
+            # reproduced since. Either the recorder's callbacks lagged, or its reliable reader
+            # held samples behind a lost one until the writer's repair (a killed writer sends
+            # none): docs/RELIABILITY.md. If the recorder stalls for good, this wait fails and
+            # says so. At 100 Hz of /clock from t >= 0 (t = 0 at most twice), 105 messages reach
+            # past 1.0 s.
             h.spin_until(
                 lambda: recorder.message_counts.get('/clock', 0) >= 105,
                 30.0,

@@ -10,9 +10,9 @@ one scene's parameters (``params`` may give one row per robot instead, shape
 (N, lumped_kernels.NP)). ``exact``: False (default) uses the vectorised atanh of Lamb's added mass
 and LLVM's reciprocal and fused multiply-add rewrites (each about an ulp; trajectories agree with
 LumpedPumpValveEnv to 1e-12 of each component's scale), True libm's (bit for bit
-LumpedPumpValveEnv, tested with losses=True; 43-54 % fewer robot-steps/s than the default).
+LumpedPumpValveEnv, tested; 35-42 % fewer robot-steps/s than the default, with losses=True).
 ``losses``: False (default) integrates the state and the pump's work only (``info`` and the
-rewards need no more; ``lumped_batch.LOSSES_OFF``, 8-22 % more robot-steps/s), True also the
+rewards need no more; ``lumped_batch.LOSSES_OFF``, 14-28 % more robot-steps/s), True also the
 energy ledger's losses in ``env.Y`` (lumped_kernels.Y_E_JET..Y_C_RAM; they stay 0 otherwise).
 Autoreset: gymnasium's ``NEXT_STEP`` mode: the step after a robot's episode ended resets that robot
 (its action is ignored, reward 0); ``info['fault']`` holds the robots' fault codes

@@ -43,7 +43,7 @@ commands ``q_cmd`` and ``valve_cmd`` (N,).
 
 ``flags | LOSSES_OFF`` integrates the state and the pump's work only, not the ledger's loss and
 correction integrals: they feed nothing back, and a learner's rewards (distance, speed, cost of
-transport) need none of them. LLVM then drops their expressions: 8-22 % more robot-steps/s
+transport) need none of them. LLVM then drops their expressions: 14-28 % more robot-steps/s
 (benchmarks/results/envs.md, N >= 64).
 The state and the pump's work agree with the single-robot runs as above (the fast path tested to
 1e-12 of each component's scale); the loss components keep the caller's values.
@@ -66,6 +66,9 @@ from pulsejet_sim.models import lumped_kernels as K
 # 'nnan'/'ninf' (the step's finiteness check must see nan and inf) nor 'reassoc'/'afn' (they
 # would undo fdlibm's compensated sums in _atanh_fast).
 FAST_MATH = {'arcp', 'contract', 'nsz'}
+# FAST_MATH applies to the fast copy's own body and what is inlined into it (the stages, rhs,
+# the spheroid, _atanh_fast), never to the compiled helpers it calls: each says fastmath=False,
+# or it would inherit the flags of whichever copy compiled it first (see lumped_kernels)
 # a bit of the batch kernel's literal flags, above lumped_kernels' bits (which ignore it):
 # integrate the state and the pump's work only, not the ledger's losses and corrections
 # (Y_E_JET..Y_C_RAM), which nothing in the state depends on; they keep the caller's values
@@ -206,7 +209,7 @@ def _atanh_fast(x):
     return r
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=False)
 def atanh_fast(x):
     """_atanh_fast over an array (for tests)."""
     out = np.empty_like(x)
@@ -414,7 +417,7 @@ def _spheroid(flags, W):
         W[R_E * B + j] = math.sqrt(e2)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=False)
 def _atanh_pass(W, exact):
     B = BLOCK
     if exact:
@@ -527,7 +530,7 @@ def _valve_after_step(valve, v_cmd, stroke):
     return (K.VALVE_SEAT if v_cmd > valve else 0.0) if below_seat else new_valve
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=False)
 def _finish(flags, W, h):
     """
     Finish the step: new state y + h/6 (k1 + 2 k2 + 2 k3 + k4), the valve's stroke, the check.
@@ -569,7 +572,7 @@ def _finish(flags, W, h):
     return n_active
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=False)
 def _load_block(W, Y, P, q_cmd, valve_cmd, status, start, n, dt):
     B = BLOCK
     for j in range(B):
@@ -609,7 +612,7 @@ def _load_block(W, Y, P, q_cmd, valve_cmd, status, start, n, dt):
     return 0
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=False)
 def _load_terms(flags, W, P, start, n):
     B = BLOCK
     for j in range(B):
@@ -622,7 +625,7 @@ def _load_terms(flags, W, P, start, n):
         W[R_LAM * B + j] = 32.0 * p[K.P_MU] * p[K.P_L_N] / (d_n * d_n)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=False)
 def _stage_state(W):
     """
     Set the first stage's state to the state, and the valve's contraction and sealing flag.
@@ -644,7 +647,7 @@ def _stage_state(W):
         W[R_SEAL * B + j] = 1.0 if seal else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def _slow_steps(flags, W, P, start, n, dt, row):
     """
     Step the robots of the block whose step the vector path does not take.
@@ -755,7 +758,7 @@ _advance_batch_exact = _compiled_copy(_advance_batch, '_advance_batch_exact')
 _advance_batch_fast = _compiled_copy(_advance_batch, '_advance_batch_fast', fastmath=FAST_MATH)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def advance_batch_exact(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status):
     """
     Advance every robot i with status[i] == OK by n_steps fixed steps of dt, exactly.
@@ -767,7 +770,7 @@ def advance_batch_exact(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status
     _advance_batch_exact(literally(flags), Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, True)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def advance_batch_fast(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status):
     """advance_batch_exact with the vectorised atanh and FAST_MATH (the default)."""
     _advance_batch_fast(literally(flags), Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, False)

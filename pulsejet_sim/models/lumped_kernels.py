@@ -56,6 +56,11 @@ if VALVE_SEAT != VALVE_MIN_OPENING:
     )
 
 # ---- term bits --------------------------------------------------------------------------------
+# Every compiled (not inlined) kernel here says fastmath=False. numba compiles a callee with the
+# fastmath flags of its first caller unless the callee sets them, and keeps that one version per
+# signature for every caller, on-disk cache included: lumped_batch's fast path (FAST_MATH) calls
+# _advance, and the single-robot runs could otherwise inherit its rewrites and stop being
+# bit-exact (found by review: the exact batch kernel did, after the fast one had compiled).
 T_SHELL_INERTIA = 1 << 0
 T_INTERNAL_ADDED_MASS = 1 << 1
 T_NOZZLE_INERTIA = 1 << 2
@@ -206,7 +211,7 @@ def shell_inertia(flags, p):
     return m_shell, inertance
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def rhs(flags, y, valve, q_cmd, p, dy, diag):
     """
     Time derivatives of y at fixed valve opening and pump command; fills diag.
@@ -392,7 +397,7 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     diag[D_SPRING_RATE] = math.sqrt(abs(spring) / m_b_total) if m_b_total > 0.0 else 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag):
     """
     Take one classical RK4 step of size h.
@@ -414,7 +419,7 @@ def _rk4(flags, y, valve, q_cmd, p, h, k1, k2, k3, k4, tmp, diag):
         y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def _check(y, p):
     for i in range(NY):
         if not math.isfinite(y[i]):
@@ -428,7 +433,7 @@ def _check(y, p):
     return OK
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def stored_energy(flags, y, p):
     """Mechanical energy held by the system, J: (elastic, vehicle, outer fluid, internal)."""
     rho = p[P_RHO]
@@ -451,7 +456,7 @@ def stored_energy(flags, y, p):
     return elastic, 0.5 * m_vehicle * u * u, 0.5 * m_x * u * u, internal
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def _seal(flags, y, p):
     """
     Seal a moving flow at the valve: the water in the nozzle stops, the shell follows the pump.
@@ -475,7 +480,7 @@ def _seal(flags, y, p):
     y[Y_E_VALVE] += 0.5 * m_s * jump * jump + 0.5 * inertance * q_n * q_n
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
     """
     Advance y by n_steps fixed steps of dt.
@@ -530,13 +535,13 @@ def _advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
     return n_steps, OK
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def advance(flags, y, p, q_cmd, valve_cmd, n_steps, dt):
     """Entry point: specialise on the term set (see module docstring)."""
     return _advance(literally(flags), y, p, q_cmd, valve_cmd, n_steps, dt)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def _evaluate(flags, y, p, q_cmd, diag):
     dy = np.empty(NY)
     rhs(flags, y, y[Y_VALVE], q_cmd, p, dy, diag)
@@ -544,7 +549,7 @@ def _evaluate(flags, y, p, q_cmd, diag):
     return e[0], e[1], e[2], e[3]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def evaluate(flags, y, p, q_cmd, diag):
     """Fill diag at the state y and return the stored energies (see stored_energy)."""
     return _evaluate(literally(flags), y, p, q_cmd, diag)
@@ -640,7 +645,7 @@ S_T_DONE = 3  # time reached (s, from the call's start); < duration only on a fa
 NSTATS = 4
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def _err_norm(y0, y1, e, h, rtol, atol):
     """RMS of the local error estimate h*sum(E_i k_i) scaled by atol + rtol*max(|y0|, |y1|)."""
     s = 0.0
@@ -651,7 +656,7 @@ def _err_norm(y0, y1, e, h, rtol, atol):
     return math.sqrt(s / N_INTEGRATED)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def _initial_step(flags, y, f0, valve, q_cmd, p, rtol, atol, span, tmp, f1, diag):
     """
     Return Hairer, Norsett & Wanner's starting step (II.4).
@@ -689,7 +694,7 @@ def _valve_at(v0, v_rate, dt):
     return min(max(v, 0.0), 1.0)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def _segment(
     flags,
     y,
@@ -841,7 +846,7 @@ def _segment(
     return OK, j, t
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats):
     """
     Advance y (NY components) by `duration` seconds holding the command, adaptively.
@@ -944,7 +949,7 @@ def _adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, 
     return OK, n_written
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False)
 def adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats):
     """Entry point: specialise on the term set (see module docstring)."""
     return _adaptive_advance(
