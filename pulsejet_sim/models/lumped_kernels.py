@@ -447,12 +447,12 @@ def stored_energy(flags, y, p):
     m_x = 0.0
     if flags & T_ADDED_MASS:
         m_x, _ = added_mass(flags, b, p)
-    m_shell, _ = shell_inertia(flags, p)
+    m_shell, inertance = shell_inertia(flags, p)
     internal = 0.5 * m_shell * w * w
     if flags & T_NOZZLE_INERTIA:
         if y[Y_VALVE] > 0.0:
             q_n = y[Y_QP] - 8.0 / 3.0 * math.pi * p[P_A] * b * w
-            internal += 0.5 * rho * p[P_L_N] / p[P_A_N] * q_n * q_n
+            internal += 0.5 * inertance * q_n * q_n
     return elastic, 0.5 * m_vehicle * u * u, 0.5 * m_x * u * u, internal
 
 
