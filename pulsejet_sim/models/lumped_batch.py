@@ -69,6 +69,7 @@ FAST_MATH = {'arcp', 'contract', 'nsz'}
 # FAST_MATH applies to the fast copy's own body and what is inlined into it (the stages, rhs,
 # the spheroid, _atanh_fast), never to the compiled helpers it calls: each says fastmath=False,
 # or it would inherit the flags of whichever copy compiled it first (see lumped_kernels)
+
 # a bit of the batch kernel's literal flags, above lumped_kernels' bits (which ignore it):
 # integrate the state and the pump's work only, not the ledger's losses and corrections
 # (Y_E_JET..Y_C_RAM), which nothing in the state depends on; they keep the caller's values
@@ -685,8 +686,9 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
                 if status[i] != K.OK:
                     done[i] = 0
                     continue
-                for c in range(N_LOSSES_OFF, K.N_INTEGRATED):
-                    row[c] = Y[i, c]
+                if flags & LOSSES_OFF:  # the single-robot step integrates them: keep the caller's
+                    for c in range(N_LOSSES_OFF, K.N_INTEGRATED):
+                        row[c] = Y[i, c]
                 d, s = K._advance(flags, Y[i], P[i], q_cmd[i], valve_cmd[i], n_steps, dt)
                 if flags & LOSSES_OFF:
                     for c in range(N_LOSSES_OFF, K.N_INTEGRATED):
