@@ -104,6 +104,10 @@ OPTIONS_SPEC = {
     'energy_model': DeprecatedAlias('coupling', COUPLINGS),  # deprecated name of 'coupling'
     'added_mass_form': Choice('exact', ('exact', 'simplified')),
     'simplified_added_mass_coefficient': Number(0.45, 0.0, 10.0, unit=''),
+    # the nozzle's section: 'rigid' = pi r_n^2; 'shell' = pi r_n^2 (b/b0)^2, the section of the
+    # ellipsoid at the nozzle inlet plane x_e that paper 001's eq. 8 writes A(x_e) (reading G,
+    # docs/PHYSICS_LUMPED.md); r_n is then the nozzle's radius at rest
+    'nozzle_section': Choice('rigid', ('rigid', 'shell')),
 }
 SECTION_SPECS = {
     'simulation': SIMULATION_SPEC,
@@ -263,6 +267,7 @@ class LumpedModel:
                 'a: a '
                 f'stronger pump inflates it past its bound), or -1 for the defaults'
             )
+        p[K.P_NOZZLE_SECTION] = math.pi * r_n * r_n / (b0 * b0)
         p[K.P_P_RELIEF] = relief
         p[K.P_P_STALL] = stall
         if g['solid_volume_m3'] >= 4.0 / 3.0 * math.pi * a * b0 * b0:
@@ -278,6 +283,8 @@ class LumpedModel:
             flags |= K.O_COUPLING_CONSISTENT
         if opts['added_mass_form'] == 'simplified':
             flags |= K.O_ADDED_MASS_SIMPLIFIED
+        if opts['nozzle_section'] == 'shell':
+            flags |= K.O_NOZZLE_FOLLOWS_SHELL
         p.setflags(write=False)
         command = Command(act['initial_pump_flow_m3_s'], act['initial_valve_opening'], 0.0)
         sim = sections['simulation']
@@ -434,7 +441,7 @@ class LumpedModel:
             thrust_n=float(d[K.D_THRUST]),
             added_mass_force_n=float(d[K.D_AMV_FORCE]),
             drag_n=float(d[K.D_DRAG]),
-            jet_speed_m_s=float(d[K.D_Q_N] / p[K.P_A_N]) if state[K.Y_VALVE] > 0 else 0.0,
+            jet_speed_m_s=float(d[K.D_Q_N] / d[K.D_A_N]) if state[K.Y_VALVE] > 0 else 0.0,
             cavity_pressure_pa=float(d[K.D_P_CAV]),
             pump_flow_m3_s=float(state[K.Y_QP]),
             valve_opening=float(state[K.Y_VALVE]),

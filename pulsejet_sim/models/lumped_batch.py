@@ -785,6 +785,11 @@ def batch_kernel(flags: int, exact: bool = False, n_state: int = K.NY):
     Compiles or loads only that path, once. Called as
     kernel(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status).
     """
+    if flags & K.O_NOZZLE_FOLLOWS_SHELL:
+        raise ValueError(
+            "options.nozzle_section: 'shell' is not in the batch kernel; allowed here: 'rigid' "
+            '(run such a scene one robot at a time, LumpedModel.advance)'
+        )
     return K.specialised(
         advance_batch_exact if exact else advance_batch_fast,
         flags,

@@ -74,6 +74,9 @@ T_JET_THRUST = 1 << 9
 # model options (also bits, so they are compiled in the same way)
 O_COUPLING_CONSISTENT = 1 << 16  # the shell pays for the jet: Bernoulli back pressure etc.
 O_ADDED_MASS_SIMPLIFIED = 1 << 17  # m_x = C_1 rho 4/3 pi b^3 instead of Lamb's exact spheroid
+# the nozzle's section follows the shell, A_n = pi r_n^2 (b/b0)^2 (reading G of paper 001's eq. 8,
+# whose A(x_e) is the ellipsoid's own section at the nozzle inlet plane, pi b^2 (1 - x_e^2))
+O_NOZZLE_FOLLOWS_SHELL = 1 << 18
 
 # ---- state indices ----------------------------------------------------------------------------
 Y_X = 0  # vehicle position, m
@@ -121,7 +124,8 @@ P_B_MAX = 18
 P_U_MAX = 19  # bound of |U|, m/s
 P_P_RELIEF = 20  # pump relief valve: full flow up to this shell pressure, Pa
 P_P_STALL = 21  # ... and none at this one (the pump's pressure-flow curve), Pa
-NP = 22
+P_NOZZLE_SECTION = 22  # A_n / b^2 when the nozzle follows the shell (pi r_n^2 / b0^2), 1
+NP = 23
 
 # ---- diagnostic outputs of the right-hand side --------------------------------------------------
 D_THRUST = 0
@@ -137,7 +141,8 @@ D_VEHICLE_MASS = 9
 D_B_MASS = 10
 D_DAMPING_RATE = 11  # estimate of the fastest decay rate, 1/s (sets the sub-steps)
 D_SPRING_RATE = 12  # shell angular frequency sqrt(k_eff/m), rad/s
-ND = 13
+D_A_N = 13  # nozzle section, m^2
+ND = 14
 
 # status codes of advance()
 OK = 0
@@ -195,7 +200,7 @@ def fluid_stiffness_force(b, u, p):
 @njit(cache=True, nogil=True, inline='always')
 def shell_inertia(flags, p):
     """
-    Return the b mode's mass without the nozzle water, I_b + m_b (kg), and Lambda (kg/m^4).
+    Return the b mode's mass without the nozzle water, I_b + m_b (kg), and a rigid nozzle's Lambda.
 
     Lambda = rho L_n / A_n is the nozzle inertance (m_l = Lambda V_b^2 is added where the flow
     decides it); each is 0 when its term is off.
@@ -209,6 +214,30 @@ def shell_inertia(flags, p):
     if flags & T_NOZZLE_INERTIA:
         inertance = p[P_RHO] * p[P_L_N] / p[P_A_N]
     return m_shell, inertance
+
+
+@njit(cache=True, nogil=True, inline='always')
+def nozzle(flags, b, p):
+    """
+    Return the nozzle's section A_n (m^2), diameter (m), inertance Lambda and dLambda/db.
+
+    Rigid (the default): A_n = pi r_n^2. With O_NOZZLE_FOLLOWS_SHELL, A_n = pi r_n^2 (b/b0)^2, so
+    Lambda = rho L_n / A_n falls as 1/b^2 and m_l = Lambda V_b^2 is a constant (reading G,
+    docs/PHYSICS_LUMPED.md). Lambda and its derivative are 0 when the nozzle_inertia term is off.
+    """
+    if flags & O_NOZZLE_FOLLOWS_SHELL:
+        a_n = p[P_NOZZLE_SECTION] * b * b
+        d_n = 2.0 * math.sqrt(a_n / math.pi)
+    else:
+        a_n = p[P_A_N]
+        d_n = p[P_D_N]
+    inertance = 0.0
+    dinertance_db = 0.0
+    if flags & T_NOZZLE_INERTIA:
+        inertance = p[P_RHO] * p[P_L_N] / a_n
+        if flags & O_NOZZLE_FOLLOWS_SHELL:
+            dinertance_db = -2.0 * inertance / b
+    return a_n, d_n, inertance, dinertance_db
 
 
 @njit(cache=True, nogil=True, fastmath=False)
@@ -239,10 +268,10 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
             q_target = q_cmd * max(0.0, (p[P_P_STALL] - p_el) / (p[P_P_STALL] - p[P_P_RELIEF]))
     dq_p = (q_target - q_p) / p[P_PUMP_TAU]
     volume = c_a * b * b / 2.0  # 4/3 pi a b^2
-    a_n = p[P_A_N]
+    a_n, d_n, inertance, dinertance_db = nozzle(flags, b, p)
 
     # shell inertia of the b mode (the nozzle part depends on the flow and is added below)
-    m_shell, inertance = shell_inertia(flags, p)
+    m_shell, _ = shell_inertia(flags, p)
     m_l = inertance * v_b * v_b
 
     # outer flow
@@ -289,7 +318,6 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
         if flags & T_VISCOUS_LOSS:
             # the paper's c b' (section 3.3): Darcy's laminar f = 64/Re along the nozzle plus a
             # square-edged inlet coefficient, dp = 1/2 rho (f L/d + K) u_n^2
-            d_n = p[P_D_N]
             lam = 32.0 * p[P_MU] * p[P_L_N] / (d_n * d_n)
             dp_visc = lam * u_n + sgn * 0.5 * rho * p[P_K_INLET] * u_n * u_n
             dpdq += (lam + rho * p[P_K_INLET] * abs(u_n)) / a_n
@@ -303,6 +331,12 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
         dp_jet_ref = sgn * 0.5 * rho * u_n * u_n
         dp_jet = 0.0
         convective = 0.0
+        # a nozzle whose section follows the shell: Lagrange's equation of its water's kinetic
+        # energy 1/2 Lambda(b) Q_n^2 has dLambda/db Q_n (V_b b' + Q_n/2) besides the terms of a
+        # rigid one (with the pump off the two cancel: m_l is then a constant)
+        dilation = 0.0
+        if flags & O_NOZZLE_FOLLOWS_SHELL:
+            dilation = dinertance_db * q_n * (v_b * w + 0.5 * q_n)
         if flags & O_COUPLING_CONSISTENT:
             dp_jet = dp_jet_ref
             dpdq += rho * abs(u_n) / a_n
@@ -310,6 +344,9 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
         else:
             c_jet = -v_b * dp_jet_ref * w
             c_nozzle = inertance * v_b * c_a * w * w * w
+            if flags & O_NOZZLE_FOLLOWS_SHELL:
+                c_nozzle -= dilation * w
+                dilation = 0.0
         dp_n = dp_visc + dp_valve + dp_jet
         m_b_total = m_shell + m_l
         force = (
@@ -319,11 +356,15 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
             + v_b * dp_n
             + inertance * v_b * (dq_p - convective)
         )
+        if flags & O_NOZZLE_FOLLOWS_SHELL:
+            force += dilation
         dw = force / m_b_total
         # cavity pressure at the nozzle inlet: what the nozzle flow needs (drop + acceleration);
         # the same definition in both couplings, so the pump's work is the same physical quantity
         dq_n = dq_p - c_a * w * w - v_b * dw
         p_cav = dp_visc + dp_valve + dp_jet_ref + inertance * dq_n
+        if flags & O_NOZZLE_FOLLOWS_SHELL:
+            p_cav += dinertance_db * w * q_n
         damping_rate = v_b * v_b * dpdq / m_b_total
     spring = p[P_K]
     if not flags & O_COUPLING_CONSISTENT:
@@ -395,6 +436,7 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     diag[D_B_MASS] = m_b_total
     diag[D_DAMPING_RATE] = damping_rate
     diag[D_SPRING_RATE] = math.sqrt(abs(spring) / m_b_total) if m_b_total > 0.0 else 0.0
+    diag[D_A_N] = a_n
 
 
 @njit(cache=True, nogil=True, fastmath=False)
@@ -447,7 +489,8 @@ def stored_energy(flags, y, p):
     m_x = 0.0
     if flags & T_ADDED_MASS:
         m_x, _ = added_mass(flags, b, p)
-    m_shell, inertance = shell_inertia(flags, p)
+    m_shell, _ = shell_inertia(flags, p)
+    _, _, inertance, _ = nozzle(flags, b, p)
     internal = 0.5 * m_shell * w * w
     if flags & T_NOZZLE_INERTIA:
         if y[Y_VALVE] > 0.0:
@@ -468,7 +511,8 @@ def _seal(flags, y, p):
     takes the rest of the change, 1/2 m_s (b'+ - b')^2 + 1/2 Lambda Q_n^2 >= 0 (the nozzle water's
     kinetic energy and the shell's inelastic jump). Their sum is the change of the stored energy.
     """
-    m_s, inertance = shell_inertia(flags, p)
+    m_s, _ = shell_inertia(flags, p)
+    _, _, inertance, _ = nozzle(flags, y[Y_B], p)
     v_b = 8.0 / 3.0 * math.pi * p[P_A] * y[Y_B]
     w_before = y[Y_W]
     q_n = y[Y_QP] - v_b * w_before
