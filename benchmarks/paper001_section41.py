@@ -68,8 +68,8 @@ READINGS = [
         'G',
         (
             "the nozzle's section follows the shell, A_n = pi r_n^2 (b/b0)^2: eq. 8's A(x_e) read"
-            " as the ellipsoid's own section at the nozzle inlet plane, the A(x) = pi b^2 (1 - x^2)"
-            ' of eqs. 4-6 (r_n = 2.2 cm at rest as printed; m_l then a constant)'
+            " as the ellipsoid's own section at the nozzle inlet plane, the A(x) ="
+            ' pi b^2 (1 - x^2) of eqs. 4-6 (r_n = 2.2 cm at rest as printed; m_l then a constant)'
         ),
         {'options': {'nozzle_section': 'shell'}},
     ),
