@@ -316,17 +316,29 @@ def test_stored_table_row_matches_a_rerun(section41):
 
     The table: benchmarks/results/paper001_section41.md.
     """
+    for stored_closure in _assert_stored_rows_match('A', section41):
+        assert abs(stored_closure) < 1e-6
+
+
+def _assert_stored_rows_match(reading_id, figures_by_coupling):
+    """
+    Assert each coupling's stored row of a reading equals its rerun; return the stored closures.
+
+    Every cell but the closure error (round-off) and the dt/2 column is compared.
+    """
     spec = importlib.util.spec_from_file_location('paper001_section41', BENCH)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    for coupling in ('paper', 'consistent'):
-        cells = bench.row_cells('A', coupling, section41[coupling])
-        stored = [line for line in _stored_rows() if line.startswith(f'| A | `{coupling}` |')]
+    closures = []
+    for coupling, figures in figures_by_coupling.items():
+        cells = bench.row_cells(reading_id, coupling, figures)
+        prefix = f'| {reading_id} | `{coupling}` |'
+        stored = [line for line in _stored_rows() if line.startswith(prefix)]
         assert len(stored) == 1, stored
         stored_cells = [c.strip() for c in stored[0].strip('|').split('|')]
-        # everything but the closure error (round-off) and the dt/2 column
         assert stored_cells[:-2] == cells[:-1], (stored_cells, cells)
-        assert abs(float(stored_cells[-2])) < 1e-6
+        closures.append(float(stored_cells[-2]))
+    return closures
 
 
 SHELL_NOZZLE = {'options': {'nozzle_section': 'shell'}}
@@ -430,15 +442,7 @@ def test_reading_g_is_refused_by_the_batch_kernel():
 
 def test_stored_reading_g_rows_match_a_rerun(section41_shell_nozzle):
     """Reading G's rows of the stored table, rerun now (benchmarks/paper001_section41.py)."""
-    spec = importlib.util.spec_from_file_location('paper001_section41', BENCH)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    for coupling, figures in section41_shell_nozzle.items():
-        cells = bench.row_cells('G', coupling, figures)
-        stored = [line for line in _stored_rows() if line.startswith(f'| G | `{coupling}` |')]
-        assert len(stored) == 1, stored
-        stored_cells = [c.strip() for c in stored[0].strip('|').split('|')]
-        assert stored_cells[:-2] == cells[:-1], (stored_cells, cells)
+    assert len(_assert_stored_rows_match('G', section41_shell_nozzle)) == 2
 
 
 def test_stored_figures_are_converged():
