@@ -38,6 +38,15 @@ F. elastic_wall: the wall's Kelvin-Voigt viscosity a tenth of the study's (`eta_
    favourable to a resonance (docs/PHYSICS_SHELL.md, "Experiment F";
    findings 3, 4, 5; internal cases, paper coupling). F.1, the mantles' free breathing, is
    benchmarks/paper000_breathing.py.
+H. hoop_tension: the muscle as the authors' code drives it, an active hoop tension of 15 N/m
+   times the routine's triangle on every section of the mantle (`zetas2_a = [0;0;0;0;0;-Ten]`,
+   octopus_derivatives.m), instead of the study's desired-radius muscle: a radial pull of
+   2 pi 15 N/m per metre of reference meridian, the `uniform` cable (docs/PHYSICS_SHELL.md,
+   "Experiment H"; findings 3, 4, 5; internal cases, both couplings).
+
+Every run of an experiment is also stored, row by row in the study's columns, in
+`<key>.csv` (and `<key>_refined.csv`) beside its markdown (under `experiments_v2/` for
+`--version 2`), so that a test can rerun one case against its stored row.
 """
 
 from __future__ import annotations
@@ -45,6 +54,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 import datetime
+import math
 import os
 from pathlib import Path
 import platform
@@ -117,6 +127,38 @@ def authors_code(spec: RunSpec) -> RunSpec:
             'coupling': 'paper_code',
             'jet': {'outlet': 'free_edge_fixed_nozzle', 'outlet_radius_m': 0.0125},
         },
+    )
+
+
+# the authors' code's muscle: `ten = -15*triangularPulse(0,1/2,1,[0 1/2 1])` (octopus_driver.m),
+# an active hoop stress resultant in N per metre of reference meridian
+CODE_HOOP_TENSION_N_M = 15.0
+
+
+def hoop_tension(spec: RunSpec) -> RunSpec:
+    """
+    Replace the muscle of a study's internal case by the code's active hoop tension.
+
+    A hoop resultant T on a strip of reference meridian dX does work -2 pi T dX r' (the ring's
+    circumference is 2 pi r): an inward radial force 2 pi T per metre of meridian, whatever the
+    wall's stiffness or shape. That is the `uniform` cable (equal weights per node, half at a free
+    edge) with a total pull of 2 pi T times the reference meridian length; the routine's period
+    and triangle stay the study's (the same line of the code gives both).
+    """
+    from pulsejet_sim.scene import load_scene
+
+    model = load_scene(spec.scene, dict(spec.overrides), replace=spec.replace).model
+    keep = ('source', 'frequency_hz', 'contraction_s', 'release_s', 'start_delay_s', 'pulse')
+    muscle = spec.overrides['actuation']
+    actuation = {k: muscle[k] for k in keep if k in muscle}
+    actuation.update(
+        kind='cable',
+        distribution='uniform',
+        amplitude=2.0 * math.pi * CODE_HOOP_TENSION_N_M * model.ref.length_m,
+    )
+    overrides = dict(spec.overrides, actuation=actuation)
+    return RunSpec(
+        spec.study, spec.labels, spec.scene, overrides, spec.duration_s, spec.replace
     )
 
 
@@ -235,6 +277,29 @@ EXPERIMENTS = {
         "everything else is the study's. The 18 internal cases of the `paper` coupling; the "
         'free breathing of the mantles (F.1) is in breathing.md.',
     ),
+    'hoop_tension': Experiment(
+        'H',
+        "The muscle as the authors' code drives it: an active hoop tension of 15 N/m, not a "
+        'desired radius',
+        'internal',
+        hoop_tension,
+        COUPLINGS,
+        True,
+        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment H", before any '
+        'run): paper 000 section 5.2 drives the muscle through a desired-radius function (Fig. '
+        "12, curves lost); the authors' public code of the same shell drives it with an active "
+        'hoop tension, `ten = -15*triangularPulse(0,1/2,1,[0 1/2 1])` (octopus_driver.m), '
+        '`Ten = interp1([0 1/2 1],ten,mod(t,per)/per)` and `zetas2_a = [0;0;0;0;0;-Ten]` '
+        'subtracted from the hoop wrench `zetas2_i` of every section ii = 2..nsezs '
+        '(octopus_derivatives.m): 15 N/m at the peak, the same on every section, whatever the '
+        "wall's stiffness. On a ring of reference meridian dX it pulls inwards with 2 pi T dX, "
+        "so here the study's muscle becomes the `uniform` cable (equal per metre of reference "
+        'meridian, the free edge included) of total pull 2 pi 15 N/m x the meridian length '
+        "(the study's cone 13.9 cm: 13.1 N; ellipsoid 16.7 cm: 15.7 N), with the study's "
+        'triangle and '
+        "periods (the code's own). Everything else is the study's; the 18 internal cases in "
+        'both couplings.',
+    ),
 }
 
 
@@ -291,6 +356,7 @@ def section(
     specs: list[RunSpec],
     stored: list[dict],
     command: str = 'benchmarks/paper000_experiments.py',
+    table_dir: Path | None = None,
 ) -> str:
     start = time.perf_counter()
     cases = [
@@ -309,6 +375,11 @@ def section(
     ]
     finer = dict(zip(loose, run_all([changed(cases[i], study.FINER) for i in loose])))
     wall = time.perf_counter() - start
+    if table_dir is not None:
+        table_dir.mkdir(parents=True, exist_ok=True)
+        study.write_table(rows, table_dir / f'{key}.csv')
+        if fine:
+            study.write_table(fine, table_dir / f'{key}_refined.csv')
     keep = {'external': 'internal', 'internal': 'external'}.get(exp.study, '')
     prefix = '' if exp.study == 'both' else exp.study
     lines = [f'## {exp.letter}. {exp.title}', '']
@@ -444,7 +515,10 @@ def main(argv=None) -> int:
     )
     start = time.perf_counter()
     new = {
-        EXPERIMENTS[k].letter: section(k, EXPERIMENTS[k], specs, stored, command) for k in keys
+        EXPERIMENTS[k].letter: section(
+            k, EXPERIMENTS[k], specs, stored, command, path.with_suffix('')
+        )
+        for k in keys
     }
     if len(keys) == len(EXPERIMENTS) or not path.exists():
         now = f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}'
