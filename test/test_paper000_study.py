@@ -33,26 +33,18 @@ REFINED = study.read_table(study.OUT / 'refined.csv')
 RERUN = ('internal/paper/cone/E80k/T0.66', 'external/consistent/ellipsoid/E80k/T0.53/falling')
 
 
-# numba compiles for the host CPU: on another processor model a rerun can differ from the stored
-# row in its last bits. Seen on 2026-12-02 (AMD EPYC): case internal/paper/cone/E80k/T0.66 bit for
-# bit; case external/consistent/ellipsoid/E80k/T0.53/falling off by 3-4 ulp in its speeds,
-# distance and thrust (<= 6.3e-16 relative) and by 8.6e-16 in its closure_relative (itself a
-# residual of 1e-8); the stored table came from a host whose CPU it did not record, where CI passed
-# this test bit for bit. Bit for bit is the rule; another CPU may move a figure by 2e-15 of its
-# size (of 1 for the relative closure), 1e12 times below the study's resolution error
-# (docs/PHYSICS_SHELL.md).
-CROSS_CPU_REL = 2e-15
+# Bit for bit on every CPU. On 2026-12-02 (AMD EPYC, AVX-512) one case came out 3-4 ulp off: numpy
+# ran np.arctan2 of the reference geometry through its AVX-512 kernels, whose last bits differ from
+# the C library's that the table's host used; shell_geometry now takes the C library's atan2 (the
+# numba kernels do already), and the rerun matches on both paths (NPY_DISABLE_CPU_FEATURES=X86_V4
+# AVX512_ICL AVX512_SPR checked the same bits).
 
 
 def assert_rerun_matches_stored(name, row, stored):
-    """Bit for bit; on another CPU within CROSS_CPU_REL of each figure (printed)."""
+    """Every figure of the rerun bit for bit the stored one."""
     assert not row.fault and not stored['fault']
     for column in study.COLUMNS:
-        got, want = row.metrics[column], stored[column]
-        if repr(got) != repr(want):
-            print(f'{name} {column}: {got!r} rerun, {want!r} stored (last bits: another CPU?)')
-            scale = 1.0 if column == 'closure_relative' else abs(want)
-            assert abs(got - want) <= CROSS_CPU_REL * scale, column
+        assert repr(row.metrics[column]) == repr(stored[column]), f'{name} {column}'
 
 
 @pytest.mark.timeout(300)

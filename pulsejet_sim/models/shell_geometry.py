@@ -218,8 +218,14 @@ def build_profile(geometry: Mapping[str, Any], n_elements: int) -> Profile:
     keep = np.concatenate([[True], seg > 1e-14])
     r, z = r[keep], z[keep]
     s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(r), np.diff(z)))])
-    # tangent angle on the dense polyline, per segment, unwrapped, at segment midpoints
-    ang = np.unwrap(np.arctan2(np.diff(z), np.diff(r)))
+    # tangent angle on the dense polyline, per segment, unwrapped, at segment midpoints. The C
+    # library's atan2, not np.arctan2: numpy runs arctan2 on CPUs with AVX-512 through kernels
+    # whose last bits differ from the C library's (and from its own on other CPUs), so the same
+    # scene would start from a reference angle an ulp apart on two machines and a stored study
+    # would not rerun bit for bit (seen on 2026-12-02: test/test_paper000_study.py)
+    ang = np.unwrap(
+        np.fromiter(map(math.atan2, np.diff(z), np.diff(r)), dtype=float, count=len(r) - 1)
+    )
     smid = 0.5 * (s[:-1] + s[1:])
     X = np.linspace(0.0, s[-1], n_elements + 1)
     rn = np.interp(X, s, r)
