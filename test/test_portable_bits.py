@@ -26,7 +26,7 @@ except ImportError:  # numpy 1
 # numpy's x86-64 dispatch targets above AVX2 (numpy 2.x names)
 AVX512_TARGETS = [t for t in ('X86_V4', 'AVX512_ICL', 'AVX512_SPR') if t in __cpu_dispatch__]
 
-CHILD = r'''
+CHILD = r"""
 import hashlib, json, sys
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.simulation import Simulation
@@ -43,7 +43,7 @@ for name in sys.argv[1:]:
         'ledger': {k: repr(v) for k, v in sim.energy_ledger().items()},
     }
 print(json.dumps(out))
-'''
+"""
 
 
 def run_child(env_extra: dict) -> dict:
