@@ -38,6 +38,10 @@ F. elastic_wall: the wall's Kelvin-Voigt viscosity a tenth of the study's (`eta_
    favourable to a resonance (docs/PHYSICS_SHELL.md, "Experiment F";
    findings 3, 4, 5; internal cases, paper coupling). F.1, the mantles' free breathing, is
    benchmarks/paper000_breathing.py.
+I. internal_inertia: the water inside the mantle carries the inertia of paper 001's
+   one-dimensional internal flow (`fluid.internal_inertia: one_dimensional`: kinetic energy
+   1/2 rho Lambda V'^2, docs/PHYSICS_SHELL.md "Experiment I"); all 54 cases, both couplings
+   (all findings).
 H. hoop_tension: the muscle as the authors' code drives it, an active hoop tension of 15 N/m
    times the routine's triangle on every section of the mantle (`zetas2_a = [0;0;0;0;0;-Ten]`,
    octopus_derivatives.m), instead of the study's desired-radius muscle: a radial pull of
@@ -160,6 +164,10 @@ def hoop_tension(spec: RunSpec) -> RunSpec:
     return RunSpec(
         spec.study, spec.labels, spec.scene, overrides, spec.duration_s, spec.replace
     )
+
+
+def internal_inertia(spec: RunSpec) -> RunSpec:
+    return changed(spec, {'fluid': {'internal_inertia': 'one_dimensional'}})
 
 
 @dataclass(frozen=True)
@@ -299,6 +307,24 @@ EXPERIMENTS = {
         'triangle and '
         "periods (the code's own). Everything else is the study's; the 18 internal cases in "
         'both couplings.',
+    ),
+    'internal_inertia': Experiment(
+        'I',
+        "The water inside carries the inertia of paper 001's one-dimensional internal flow",
+        'both',
+        internal_inertia,
+        COUPLINGS,
+        True,
+        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment I", before any '
+        "study run): paper 000's wall loads are drag and an added mass \"representing the load "
+        'locally exerted by pressure" (eq. (22)); the study\'s added mass is the outer '
+        "water's, local. The water inside, which must leave through the mantle's opening, gets "
+        "the kinetic energy of paper 001's internal flow (section 3.4, eqs. 4-6: the flux "
+        "through a section is the volume behind it), `1/2 rho Lambda V'^2` with `Lambda = int "
+        '(V_b(z)/V)^2 / (pi r^2) dz` over the reference cavity (cone 11.1 /m, ellipsoid 34.8 /m); '
+        "by Lagrange's equation a uniform pressure `-rho Lambda V''` on the inner wall (and, "
+        'in the consistent coupling, on the vehicle through the frame). Everything else is the '
+        "study's; all 54 cases in both couplings.",
     ),
 }
 

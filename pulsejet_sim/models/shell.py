@@ -73,6 +73,12 @@ and ram loss) + the thrust mismatch ``(1 - C_f) rho A u_j^2 U``.  With C_f = 1 a
 transfers are exact in the continuous model, so ``closure_error`` measures time discretisation
 only.
 
+*Water inside* (``fluid.internal_inertia: one_dimensional``, experiment I of
+docs/PHYSICS_SHELL.md).  Kinetic energy ``1/2 rho Lambda V'^2`` of paper 001's one-dimensional
+internal flow, ``Lambda`` the reference cavity's inertance (``Profile.internal_inertance_per_m``);
+by Lagrange's equation a uniform pressure ``-rho Lambda V''`` on the inner wall, stored in the
+ledger as ``stored_kinetic_internal_flow``.
+
 *Axis contact.*  A deeply collapsed wall meets the opposite wall on the axis: below the contact
 radius ``min(h, r0/2)`` a conservative barrier (modulus E over the gap, log-barrier with a linear
 continuation) keeps the midsurface off the axis; its energy is part of ``stored_elastic``.  This
@@ -105,7 +111,9 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
     material:   {youngs_modulus_pa, viscosity_pa_s, poisson_ratio, half_thickness_m, density_kg_m3,
                  shear_correction: 1, rotary_inertia_scale: 1}
     fluid:      {density_kg_m3, added_mass_coefficient: 1.1, added_mass_length_m: max(r0)/2,
-                 tangential_drag_coefficient: 0.05, drag_coefficient: 1.0}
+                 tangential_drag_coefficient: 0.05, drag_coefficient: 1.0,
+                 internal_inertia: none|one_dimensional (the water inside carries
+                 1/2 rho Lambda V'^2, paper 001's 1-D internal flow; outlet edge only)}
     jet:        {outlet: ring|edge|free_edge_fixed_nozzle, outlet_radius_m: ring/2 (not with edge),
                  inlet_area_m2: A_out + 3 pi (10 mm)^2,
                  thrust_coefficient: 1}
@@ -172,6 +180,12 @@ DISTRIBUTIONS = ('uniform', 'rising', 'falling')
 COUPLINGS = ('consistent', 'paper', 'paper_code')
 OUTLETS = ('ring', 'edge', 'free_edge_fixed_nozzle')
 DESIRED_RADIUS = ('proportional', 'constant_depth', 'constant_depth_to_edge')
+#: the water inside: no inertia of its own (paper 000's loads), or paper 001's one-dimensional
+#: internal flow carried over to the shell (experiment I)
+INTERNAL_INERTIA = ('none', 'one_dimensional')
+#: the reference profile is resampled this finely for the internal inertance, so that it does
+#: not change with the mesh
+DENSE_ELEMENTS = 4000
 #: the routine's rise and fall: half cosines, or straight lines (the authors' code's
 #: `triangularPulse`, paper 000's study)
 PULSE_SHAPES = {'half_cosine': sk.PULSE_HALF_COSINE, 'triangle': sk.PULSE_TRIANGLE}
@@ -445,6 +459,7 @@ class ShellModel:
                 'added_mass_length_m',
                 'tangential_drag_coefficient',
                 'drag_coefficient',
+                'internal_inertia',
             ),
         )
         rho = _num(fl, 'density_kg_m3', 'fluid', 1.0, 20000.0)
@@ -452,6 +467,7 @@ class ShellModel:
         la = _num(fl, 'added_mass_length_m', 'fluid', 0.0, 10.0, default=0.5 * rmax0)
         Ct = _num(fl, 'tangential_drag_coefficient', 'fluid', 0.0, 10.0, default=0.05)
         Cd = _num(fl, 'drag_coefficient', 'fluid', 0.0, 10.0, default=1.0)
+        internal_inertia = _choice(fl, 'internal_inertia', 'fluid', INTERNAL_INERTIA, 'none')
 
         jet = _section(scene, 'jet', required=terms['jet'])
         _unknown(jet, 'jet', ('outlet', 'outlet_radius_m', 'inlet_area_m2', 'thrust_coefficient'))
@@ -490,6 +506,20 @@ class ShellModel:
             )
         )
         A_out = math.pi * r_out**2
+        inertance = 0.0
+        if internal_inertia == 'one_dimensional':
+            # experiment I (docs/PHYSICS_SHELL.md): the 1-D flow of the water inside ends at the
+            # cavity's own open section, so the jet must leave through the free edge; a smaller
+            # nozzle would add a contraction whose inertance this reading does not give
+            if outlet != 'edge' or code or integrator == 'verlet' or not terms['jet']:
+                raise ModelError(
+                    f'fluid.internal_inertia: one_dimensional is not available with '
+                    f'coupling: {coupling}, jet.outlet: {outlet}, integrator: {integrator}, '
+                    f'terms.jet: {str(terms["jet"]).lower()}; allowed: coupling paper or '
+                    'consistent, jet.outlet: edge, an implicit integrator and the jet on '
+                    '(or internal_inertia: none)'
+                )
+            inertance = build_profile(geo, DENSE_ELEMENTS).internal_inertance_per_m()
         A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01**2)
         Cf = _num(jet, 'thrust_coefficient', 'jet', 0.0, 2.0, default=1.0)
 
@@ -726,6 +756,7 @@ class ShellModel:
         P[sk.P_AMP] = amp
         P[sk.P_FREQ] = freq
         P[sk.P_PULSE] = PULSE_SHAPES[pulse]
+        P[sk.P_LAMBDA] = inertance
         P[sk.P_TC] = tc
         P[sk.P_TR] = tr
         P[sk.P_DT] = dt
@@ -1018,10 +1049,12 @@ class ShellModel:
             k_veh += 0.5 * float(self.P[sk.P_MSHELL]) * U * U
         k_out = 0.5 * self.body_added_mass_kg * U * U + k_am
         el = float(st[sk.T_EEL])
-        return el + k_veh + k_out + float(kint), el, k_veh, k_out, float(kint)
+        # the water inside flowing towards the open end (0 unless fluid.internal_inertia is on)
+        k_flow = 0.5 * float(self.P[sk.P_RHO] * self.P[sk.P_LAMBDA]) * float(st[sk.T_VDOT]) ** 2
+        return el + k_veh + k_out + float(kint) + k_flow, el, k_veh, k_out, float(kint), k_flow
 
     def energy_ledger(self, state: np.ndarray) -> dict[str, float]:
-        tot, el, kv, ko, ki = self._stored(state)
+        tot, el, kv, ko, ki, kf = self._stored(state)
         T = state[6 * self.n_nodes:]
         led = {
             'stored_elastic': el,
@@ -1035,6 +1068,8 @@ class ShellModel:
             'out_viscous': float(T[sk.S_VISC]),
             'out_other': float(T[sk.S_OTHER]),
         }
+        if self.P[sk.P_LAMBDA] > 0.0:
+            led['stored_kinetic_internal_flow'] = kf
         out = led['out_jet_kinetic'] + led['out_drag'] + led['out_viscous'] + led['out_other']
         created = 0.0
         if self.flags & sk.F_PAPER:

@@ -49,10 +49,36 @@ class Profile:
         return float(self.r0[-1])
 
     def volume_m3(self) -> float:
+        return float(self._frusta().sum())
+
+    def _frusta(self) -> np.ndarray:
         r, z = self.r0, self.z0
-        return float(
-            np.sum(math.pi / 3.0 * (r[:-1] ** 2 + r[:-1] * r[1:] + r[1:] ** 2) * (z[:-1] - z[1:]))
-        )
+        return math.pi / 3.0 * (r[:-1] ** 2 + r[:-1] * r[1:] + r[1:] ** 2) * (z[:-1] - z[1:])
+
+    def internal_inertance_per_m(self) -> float:
+        """
+        Inertance Lambda, 1/m, of the water inside for a uniform dilation of the cavity.
+
+        One-dimensional internal flow (paper 001 section 3.4, eqs. 4-6, carried over to any
+        profile): the water crossing the section at z is the volume behind it, so its flux is
+        ``Q V_b(z)/V`` for an outflow ``Q`` at the open end, and its kinetic energy
+        ``1/2 rho Q^2 Lambda`` with ``Lambda = int (V_b(z)/V)^2 / (pi r(z)^2) dz`` from the pole
+        to the open end.  For paper 001's ellipsoid this is its ``m_b`` over ``(dV/db)^2``.
+        """
+        r, z = self.r0, self.z0
+        dz = z[:-1] - z[1:]
+        if np.any(dz < 0.0):
+            raise ModelError(
+                'fluid.internal_inertia: one_dimensional needs a mantle whose axial position '
+                'falls monotonically from the pole to the open end (a one-dimensional flow '
+                'along the axis); this profile turns back; allowed: none'
+            )
+        behind = np.concatenate([[0.0], np.cumsum(self._frusta())])
+        flux = behind / behind[-1]
+        area = math.pi * r**2
+        f = np.zeros_like(r)
+        f[1:] = flux[1:] ** 2 / area[1:]
+        return float(np.sum(0.5 * (f[:-1] + f[1:]) * dz))
 
 
 def _num(

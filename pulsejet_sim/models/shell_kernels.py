@@ -89,7 +89,10 @@ P_VSCALE = 29  # Newton velocity scale: shortest element / dt (converged when a 
 # node by less than newton_tolerance times the shortest element)
 P_MSHELL = 30  # mass of the moving shell, kg (carried by the vehicle in the paper coupling)
 P_PULSE = 31  # the routine's pulse: PULSE_HALF_COSINE or PULSE_TRIANGLE
-N_PARAMS = 32
+# inertance of the water inside the cavity, 1/m (fluid.internal_inertia: one_dimensional): its
+# kinetic energy is 1/2 rho Lambda V'^2 (0: the water inside carries no inertia of its own)
+P_LAMBDA = 32
+N_PARAMS = 33
 PULSE_HALF_COSINE, PULSE_TRIANGLE = 0.0, 1.0
 
 # ---- element table E[e, :] -------------------------------------------------------------------
@@ -782,6 +785,30 @@ def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
 
 
 @njit(cache=True, nogil=True)
+def flow_rate(Nd, g, v, u_frame):
+    """Cavity volume rate grad V . v_rel, m^3/s, with axial velocities relative to u_frame."""
+    Q = 0.0
+    for i in range(Nd.shape[0]):
+        Q += g[3 * i] * v[3 * i] * (1.0 - Nd[i, N_FIXR])
+        Q += g[3 * i + 1] * (v[3 * i + 1] - u_frame) * (1.0 - Nd[i, N_FIXZ])
+    return Q
+
+
+@njit(cache=True, nogil=True)
+def rank_one_coefficient(flags, st, P, dt, inertia):
+    """
+    Coefficient c of the Newton matrix's rank-one part c g g^T (g = grad V on the free dofs).
+
+    The jet pressure's d(p)/dV' (consistent coupling) plus the internal water's rho Lambda / alpha.
+    """
+    c = inertia
+    if (flags & F_JET) and not (flags & F_PAPER):
+        Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
+        c += dt * P[P_RHO] * abs(st[T_VDOT]) / (Aj * Aj)
+    return c
+
+
+@njit(cache=True, nogil=True)
 def _check(q, v, n1, P):
     for k in range(6 * n1):
         if not math.isfinite(q[k] if k < 3 * n1 else v[k - 3 * n1]):
@@ -856,6 +883,11 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
         for i in range(kc, n1):
             wz[3 * i + 1] = Nd[i, N_DAREA] / aw
     have_lu = False  # the factorised Newton matrix is reused across steps (modified Newton)
+    # the water inside: 1/2 rho Lambda Q^2 with Q = grad V . v_rel (docs/PHYSICS_SHELL.md,
+    # "Experiment I"); Lagrange's equation gives the impulse rho Lambda (Q_end - Q_start) grad V
+    rho_lam = P[P_RHO] * P[P_LAMBDA]
+    g_end = np.zeros(n)
+    q_end = np.zeros(n)
     for step in range(n_steps):
         t = time0 + step * dt
         for k in range(n):
@@ -919,6 +951,10 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                 vs[k] = vn[k] + alpha * (vn[k] - vprev[k]) if step > 0 else vn[k]
                 vprev[k] = vn[k]
             vs[rz] = Us
+            q_start = 0.0  # the water's volume rate at the start of the step, m^3/s
+            if rho_lam > 0.0:
+                volume_grad(qn, n1, g_end)
+                q_start = flow_rate(Nd, g_end, vn, U if body else 0.0)
             fresh = False
             converged = False
             prev = 1e300
@@ -957,6 +993,20 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         R[rz] = mb_ * (Us - U) / alpha - dt * (-ram_ + st[T_FRING])
                     else:
                         R[rz] = mb_ * (Us - U) / alpha - dt * (thr_ + dr_b - ram_ + st[T_FRING])
+                if rho_lam > 0.0:
+                    # end-of-step volume rate, from the end-of-step shape and velocities
+                    for i in range(n1):
+                        q_end[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
+                        q_end[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Us) * (
+                            1.0 - Nd[i, N_FIXZ]
+                        )
+                    volume_grad(q_end, n1, g_end)
+                    for k in range(n):
+                        v1[k] = vn[k] + (vs[k] - vn[k]) / alpha
+                    u_end = U + (Us - U) / alpha if body else 0.0
+                    imp = rho_lam * (flow_rate(Nd, g_end, v1, u_end) - q_start)
+                    for k in range(n):
+                        R[k] += imp * gf[k]  # the vehicle's row too: it carries the frame
                 state[tail + S_NIT] += 1.0
                 # backtracking line search on |R|: halve a Newton step that increased the residual
                 rnorm = 0.0
@@ -978,10 +1028,9 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
                     pcoef = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
                     band_solve(J, n, BW, wz, zz)
-                elif have_lu and (flags & F_JET) and not (flags & F_PAPER):
+                elif have_lu and (((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0):
                     # refresh the rank-one pressure correction for the reused factorisation
-                    Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
-                    pcoef = dt * P[P_RHO] * abs(st[T_VDOT]) / (Aj * Aj)
+                    pcoef = rank_one_coefficient(flags, st, P, dt, rho_lam / alpha)
                     band_solve(J, n, BW, gf, zz)
                 if not have_lu:
                     fresh = True
@@ -1033,9 +1082,8 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
                         pcoef = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
                         band_solve(J, n, BW, wz, zz)
-                    elif (flags & F_JET) and not (flags & F_PAPER):
-                        Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
-                        pcoef = dt * P[P_RHO] * abs(st[T_VDOT]) / (Aj * Aj)
+                    elif ((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0:
+                        pcoef = rank_one_coefficient(flags, st, P, dt, rho_lam / alpha)
                         band_solve(J, n, BW, gf, zz)
                     have_lu = True
                 band_solve(J, n, BW, R, dv)
