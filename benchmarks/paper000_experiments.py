@@ -321,7 +321,7 @@ EXPERIMENTS = {
         "water's, local. The water inside, which must leave through the mantle's opening, gets "
         "the kinetic energy of paper 001's internal flow (section 3.4, eqs. 4-6: the flux "
         "through a section is the volume behind it), `1/2 rho Lambda V'^2` with `Lambda = int "
-        '(V_b(z)/V)^2 / (pi r^2) dz` over the reference cavity (cone 11.1 /m, ellipsoid 34.8 /m); '
+        '(V_b(z)/V)^2 / (pi r^2) dz` over the reference cavity (cone 11.1 /m, ellipsoid 34.6 /m); '
         "by Lagrange's equation a uniform pressure `-rho Lambda V''` on the inner wall (and, "
         'in the consistent coupling, on the vehicle through the frame). Everything else is the '
         "study's; all 54 cases in both couplings.",

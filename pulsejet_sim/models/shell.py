@@ -1097,18 +1097,13 @@ class ShellModel:
         """(r_m, z_m) node arrays of the current meridian (body frame, ring at z = 0)."""
         return self.profile_of(state)
 
-    def stable_step_s(self, state: np.ndarray) -> float:
+    def _linearised(self, state: np.ndarray):
         """
-        Return the largest stable step of the explicit (verlet) scheme at this state.
+        Return the free dofs' mass M, stiffness K = -dF/dq and damping C = -dF/dv at the state.
 
-        From the generalised eigenvalues of the linearised system at the state: the highest
-        circular frequency omega (stiffness K against the mass M, elastic + geometric) and the
-        highest damping rate c (Kelvin-Voigt and drag, C against M); central differences with
-        damping are stable for dt <= 2/omega (sqrt(1 + xi^2) - xi), xi = c/(2 omega).  A 0.9
-        safety factor covers the stiffening of large deformations.
+        Dense; the body held still (no vehicle dof); M carries the nodes' own and added mass, not
+        the water inside (``linear_modes`` adds it).
         """
-        import scipy.linalg as sla
-
         n1 = self.n_nodes
         t = float(state[6 * n1 + sk.S_TIME])
         Kb, Cb = sk.stiffness_damping(self.flags, state, t, self.E, self.Nd, self.P)
@@ -1128,10 +1123,49 @@ class ShellModel:
             M[3 * i + 1, 3 * i + 1] = self.Nd[i, sk.N_MZZ]
             M[3 * i + 2, 3 * i + 2] = self.Nd[i, sk.N_MTT]
         idx = np.flatnonzero(free)
-        Mf = M[np.ix_(idx, idx)]
-        Kf = -K[np.ix_(idx, idx)]
+        self._free_dofs = idx
+        sub = np.ix_(idx, idx)
+        return M[sub], -K[sub], -C[sub]
+
+    def linear_modes(self, state: np.ndarray) -> list[tuple[float, float]]:
+        """
+        Return the under-damped modes of the mantle about ``state``: (frequency_hz, damping_ratio).
+
+        Undamped natural frequency ``|lambda| / 2 pi`` and damping ratio ``-Re lambda / |lambda|``
+        of each complex pair of ``M x'' + C x' + K x = 0``, lowest first; the body held still.
+        With ``fluid.internal_inertia`` the water inside adds ``rho Lambda g g^T`` to M
+        (g = grad V): its kinetic energy ``1/2 rho Lambda V'^2``.
+        """
+        Mf, Kf, Cf = self._linearised(state)
+        if self.P[sk.P_LAMBDA] > 0.0:
+            g = np.zeros(3 * self.n_nodes)
+            sk.volume_grad(state[: 3 * self.n_nodes].copy(), self.n_nodes, g)
+            gf = g[self._free_dofs]
+            Mf = Mf + self.P[sk.P_RHO] * self.P[sk.P_LAMBDA] * np.outer(gf, gf)
+        n = Mf.shape[0]
+        Minv = np.linalg.inv(Mf)
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ Kf, -Minv @ Cf]])
+        lam = np.linalg.eigvals(A)
+        # under-damped: a clearly complex pair (near-critical clusters come out of the solver
+        # with round-off imaginary parts, sqrt(1 - zeta^2) ~ 1e-4)
+        pairs = lam[lam.imag > 1e-2 * np.abs(lam)]
+        modes = [(abs(x) / (2 * math.pi), -x.real / abs(x)) for x in pairs]
+        return sorted(modes)
+
+    def stable_step_s(self, state: np.ndarray) -> float:
+        """
+        Return the largest stable step of the explicit (verlet) scheme at this state.
+
+        From the generalised eigenvalues of the linearised system at the state: the highest
+        circular frequency omega (stiffness K against the mass M, elastic + geometric) and the
+        highest damping rate c (Kelvin-Voigt and drag, C against M); central differences with
+        damping are stable for dt <= 2/omega (sqrt(1 + xi^2) - xi), xi = c/(2 omega).  A 0.9
+        safety factor covers the stiffening of large deformations.
+        """
+        import scipy.linalg as sla
+
+        Mf, Kf, Cf = self._linearised(state)
         Kf = 0.5 * (Kf + Kf.T)
-        Cf = -C[np.ix_(idx, idx)]
         Cf = 0.5 * (Cf + Cf.T)
         w2 = float(np.max(sla.eigh(Kf, Mf, eigvals_only=True)))
         c = float(np.max(sla.eigh(Cf, Mf, eigvals_only=True))) if np.any(Cf) else 0.0
