@@ -42,6 +42,9 @@ I. internal_inertia: the water inside the mantle carries the inertia of paper 00
    one-dimensional internal flow (`fluid.internal_inertia: one_dimensional`: kinetic energy
    1/2 rho Lambda V'^2, docs/PHYSICS_SHELL.md "Experiment I"); all 54 cases, both couplings
    (all findings).
+J. internal_inertia_deforming: as I, with Lambda of the current shape instead of the reference
+   (`one_dimensional_deforming`): the water resists a shape that narrows its way out while it flows
+   (docs/PHYSICS_SHELL.md "Experiment J"; all 54 cases, both couplings; all findings).
 H. hoop_tension: the muscle as the authors' code drives it, an active hoop tension of 15 N/m
    times the routine's triangle on every section of the mantle (`zetas2_a = [0;0;0;0;0;-Ten]`,
    octopus_derivatives.m), instead of the study's desired-radius muscle: a radial pull of
@@ -168,6 +171,10 @@ def hoop_tension(spec: RunSpec) -> RunSpec:
 
 def internal_inertia(spec: RunSpec) -> RunSpec:
     return changed(spec, {'fluid': {'internal_inertia': 'one_dimensional'}})
+
+
+def internal_inertia_deforming(spec: RunSpec) -> RunSpec:
+    return changed(spec, {'fluid': {'internal_inertia': 'one_dimensional_deforming'}})
 
 
 @dataclass(frozen=True)
@@ -325,6 +332,22 @@ EXPERIMENTS = {
         "by Lagrange's equation a uniform pressure `-rho Lambda V''` on the inner wall (and, "
         'in the consistent coupling, on the vehicle through the frame). Everything else is the '
         "study's; all 54 cases in both couplings.",
+    ),
+    'internal_inertia_deforming': Experiment(
+        'J',
+        "The water inside as in I, its inertance taken on the mantle's current shape",
+        'both',
+        internal_inertia_deforming,
+        COUPLINGS,
+        True,
+        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment J", before any '
+        "study run): experiment I's internal flow with `Lambda = int (V_b/V)^2 / (pi r^2) dz` "
+        'taken on the current shape instead of the reference one (paper 001 builds its internal '
+        "flow on the ellipsoid's current sections, `A(x) = pi b^2 (1 - x^2)`, eqs. 4-6), "
+        'because the independent review of I found the constant `Lambda` least faithful where '
+        "the mantle's edge, the nozzle, closes. By Lagrange's equation the wall feels "
+        "`-rho (Lambda V')' grad V - 1/2 rho V'^2 grad Lambda`. Everything else is the study's; "
+        'all 54 cases in both couplings.',
     ),
 }
 

@@ -54,12 +54,40 @@ def test_inertance_of_the_ellipsoid_is_paper_001s_internal_flow():
     assert profile.internal_inertance_per_m() == pytest.approx(expected, rel=1e-4)
 
 
+def test_inertance_of_the_current_shape_and_its_gradient():
+    """shell_kernels.inertance: the reference mesh's Lambda, and an exact gradient."""
+    scene = cone_scene('paper', 1e-3)
+    scene['fluid']['internal_inertia'] = 'one_dimensional_deforming'
+    model = ShellModel.from_scene(scene)
+    n1 = model.n_nodes
+    rest = model.initial_state()[: 3 * n1].copy()
+    assert sk.inertance(rest, n1, np.zeros(3 * n1)) == pytest.approx(
+        model.ref.internal_inertance_per_m(), rel=1e-12
+    )
+    q = run(model, 0.3)[: 3 * n1].copy()  # the rising pull narrows the edge
+    grad = np.zeros(3 * n1)
+    lam = sk.inertance(q, n1, grad)
+    assert lam > 1.5 * model.P[sk.P_LAMBDA]
+    assert model.inertance(run(model, 0.3)) == pytest.approx(lam, rel=1e-12)
+    for k in range(3 * n1):
+        step = np.zeros(3 * n1)
+        step[k] = 1e-7
+        central = (
+            sk.inertance(q + step, n1, np.zeros(3 * n1))
+            - sk.inertance(q - step, n1, np.zeros(3 * n1))
+        ) / 2e-7
+        assert central == pytest.approx(grad[k], abs=1e-7 * np.abs(grad).max()), k
+
+
+@pytest.mark.parametrize('option', ['one_dimensional', 'one_dimensional_deforming'])
 @pytest.mark.parametrize('coupling', ['paper', 'consistent'])
-def test_ledger_stores_the_water_insides_kinetic_energy_and_closes_at_second_order(coupling):
+def test_ledger_stores_the_water_insides_kinetic_energy_and_closes_at_second_order(
+    coupling, option
+):
     closures = []
     for dt in (2e-3, 1e-3):
         scene = cone_scene(coupling, dt)
-        scene['fluid']['internal_inertia'] = 'one_dimensional'
+        scene['fluid']['internal_inertia'] = option
         model = ShellModel.from_scene(scene)
         state = run(model, 0.6)
         led = model.energy_ledger(state)
@@ -188,5 +216,6 @@ def test_internal_inertia_is_refused_where_its_reading_does_not_hold(change, mes
 def test_an_unknown_internal_inertia_names_the_value_and_what_is_allowed():
     scene = cone_scene('consistent', 1e-3)
     scene['fluid']['internal_inertia'] = 'slug'
-    with pytest.raises(ModelError, match="'slug'.*none, one_dimensional"):
+    allowed = 'none, one_dimensional, one_dimensional_deforming'
+    with pytest.raises(ModelError, match=f"'slug'.*{allowed}"):
         ShellModel.from_scene(scene)

@@ -77,7 +77,10 @@ only.
 docs/PHYSICS_SHELL.md).  Kinetic energy ``1/2 rho Lambda V'^2`` of paper 001's one-dimensional
 internal flow, ``Lambda`` the reference cavity's inertance (``Profile.internal_inertance_per_m``);
 by Lagrange's equation a uniform pressure ``-rho Lambda V''`` on the inner wall, stored in the
-ledger as ``stored_kinetic_internal_flow``.
+ledger as ``stored_kinetic_internal_flow``.  ``one_dimensional_deforming`` (experiment J) takes
+``Lambda`` of the current shape (``shell_kernels.inertance``): the pressure becomes
+``-rho (Lambda V')'`` and the wall also feels ``-1/2 rho V'^2 grad Lambda``, which resists a shape
+that narrows the water's way out while it flows.
 
 *Axis contact.*  A deeply collapsed wall meets the opposite wall on the axis: below the contact
 radius ``min(h, r0/2)`` a conservative barrier (modulus E over the gap, log-barrier with a linear
@@ -112,8 +115,9 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
                  shear_correction: 1, rotary_inertia_scale: 1}
     fluid:      {density_kg_m3, added_mass_coefficient: 1.1, added_mass_length_m: max(r0)/2,
                  tangential_drag_coefficient: 0.05, drag_coefficient: 1.0,
-                 internal_inertia: none|one_dimensional (the water inside carries
-                 1/2 rho Lambda V'^2, paper 001's 1-D internal flow; outlet edge only)}
+                 internal_inertia: none|one_dimensional|one_dimensional_deforming (the water
+                 inside carries 1/2 rho Lambda V'^2, paper 001's 1-D internal flow, Lambda of
+                 the reference or of the current shape; outlet edge only)}
     jet:        {outlet: ring|edge|free_edge_fixed_nozzle, outlet_radius_m: ring/2 (not with edge),
                  inlet_area_m2: A_out + 3 pi (10 mm)^2,
                  thrust_coefficient: 1}
@@ -182,7 +186,7 @@ OUTLETS = ('ring', 'edge', 'free_edge_fixed_nozzle')
 DESIRED_RADIUS = ('proportional', 'constant_depth', 'constant_depth_to_edge')
 #: the water inside: no inertia of its own (paper 000's loads), or paper 001's one-dimensional
 #: internal flow carried over to the shell (experiment I)
-INTERNAL_INERTIA = ('none', 'one_dimensional')
+INTERNAL_INERTIA = ('none', 'one_dimensional', 'one_dimensional_deforming')
 #: the reference profile is resampled this finely for the internal inertance, so that it does
 #: not change with the mesh
 DENSE_ELEMENTS = 4000
@@ -507,7 +511,7 @@ class ShellModel:
         )
         A_out = math.pi * r_out**2
         inertance = 0.0
-        if internal_inertia == 'one_dimensional':
+        if internal_inertia != 'none':
             # experiment I (docs/PHYSICS_SHELL.md): the 1-D flow of the water inside ends at the
             # cavity's own open section, so the jet must leave through the free edge; a smaller
             # nozzle would add a contraction whose inertance this reading does not give
@@ -757,6 +761,7 @@ class ShellModel:
         P[sk.P_FREQ] = freq
         P[sk.P_PULSE] = PULSE_SHAPES[pulse]
         P[sk.P_LAMBDA] = inertance
+        P[sk.P_LAMBDA_DEFORMING] = float(internal_inertia == 'one_dimensional_deforming')
         P[sk.P_TC] = tc
         P[sk.P_TR] = tr
         P[sk.P_DT] = dt
@@ -1050,8 +1055,15 @@ class ShellModel:
         k_out = 0.5 * self.body_added_mass_kg * U * U + k_am
         el = float(st[sk.T_EEL])
         # the water inside flowing towards the open end (0 unless fluid.internal_inertia is on)
-        k_flow = 0.5 * float(self.P[sk.P_RHO] * self.P[sk.P_LAMBDA]) * float(st[sk.T_VDOT]) ** 2
+        k_flow = 0.5 * float(self.P[sk.P_RHO] * self.inertance(state)) * float(st[sk.T_VDOT]) ** 2
         return el + k_veh + k_out + float(kint) + k_flow, el, k_veh, k_out, float(kint), k_flow
+
+    def inertance(self, state: np.ndarray) -> float:
+        """Inertance of the water inside at ``state``, 1/m (0 without fluid.internal_inertia)."""
+        if self.P[sk.P_LAMBDA_DEFORMING] > 0.5:
+            n = 3 * self.n_nodes
+            return float(sk.inertance(state[:n].copy(), self.n_nodes, np.zeros(n)))
+        return float(self.P[sk.P_LAMBDA])
 
     def energy_ledger(self, state: np.ndarray) -> dict[str, float]:
         tot, el, kv, ko, ki, kf = self._stored(state)
@@ -1141,7 +1153,7 @@ class ShellModel:
             g = np.zeros(3 * self.n_nodes)
             sk.volume_grad(state[: 3 * self.n_nodes].copy(), self.n_nodes, g)
             gf = g[self._free_dofs]
-            Mf = Mf + self.P[sk.P_RHO] * self.P[sk.P_LAMBDA] * np.outer(gf, gf)
+            Mf = Mf + self.P[sk.P_RHO] * self.inertance(state) * np.outer(gf, gf)
         n = Mf.shape[0]
         Minv = np.linalg.inv(Mf)
         A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ Kf, -Minv @ Cf]])

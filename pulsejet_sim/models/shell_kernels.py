@@ -92,7 +92,9 @@ P_PULSE = 31  # the routine's pulse: PULSE_HALF_COSINE or PULSE_TRIANGLE
 # inertance of the water inside the cavity, 1/m (fluid.internal_inertia: one_dimensional): its
 # kinetic energy is 1/2 rho Lambda V'^2 (0: the water inside carries no inertia of its own)
 P_LAMBDA = 32
-N_PARAMS = 33
+# 1: Lambda follows the current shape (fluid.internal_inertia: one_dimensional_deforming)
+P_LAMBDA_DEFORMING = 33
+N_PARAMS = 34
 PULSE_HALF_COSINE, PULSE_TRIANGLE = 0.0, 1.0
 
 # ---- element table E[e, :] -------------------------------------------------------------------
@@ -785,6 +787,58 @@ def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
 
 
 @njit(cache=True, nogil=True)
+def inertance(q, n1, grad):
+    """
+    Inertance Lambda of the cavity's current shape, 1/m, and its gradient into ``grad``.
+
+    ``Lambda = int (V_b/V)^2 / (pi r^2) dz`` by the trapezoidal rule on the nodes (V_b the volume
+    of the frusta between the pole and the node), as Profile.internal_inertance_per_m does on the
+    reference; the gradient by reverse accumulation (dofs 3i: r, 3i+1: z; theta 0).
+    """
+    ne = n1 - 1
+    for k in range(3 * n1):
+        grad[k] = 0.0
+    behind = np.zeros(n1)
+    for e in range(ne):
+        ra, za, rb, zb = q[3 * e], q[3 * e + 1], q[3 * e + 3], q[3 * e + 4]
+        behind[e + 1] = behind[e] + math.pi / 3.0 * (ra * ra + ra * rb + rb * rb) * (za - zb)
+    V = behind[ne]
+    f = np.zeros(n1)  # f_0 = 0: nothing flows through the pole
+    for i in range(1, n1):
+        r = q[3 * i]
+        f[i] = (behind[i] / V) ** 2 / (math.pi * r * r)
+    lam = 0.0
+    w = np.zeros(n1)  # dLambda/df_i
+    for e in range(ne):
+        dz = q[3 * e + 1] - q[3 * e + 4]
+        fm = 0.5 * (f[e] + f[e + 1])
+        lam += fm * dz
+        w[e] += 0.5 * dz
+        w[e + 1] += 0.5 * dz
+        grad[3 * e + 1] += fm
+        grad[3 * e + 4] -= fm
+    adj = np.zeros(n1)  # dLambda/d(behind_i) at fixed V, then V = behind[ne] added
+    adj_v = 0.0
+    for i in range(1, n1):
+        r = q[3 * i]
+        adj[i] = w[i] * 2.0 * behind[i] / (V * V * math.pi * r * r)
+        adj_v -= w[i] * 2.0 * f[i] / V
+        grad[3 * i] -= w[i] * 2.0 * f[i] / r
+    adj[ne] += adj_v
+    acc = 0.0
+    for e in range(ne - 1, -1, -1):
+        acc += adj[e + 1]  # behind_i sums the frusta e < i
+        ra, za, rb, zb = q[3 * e], q[3 * e + 1], q[3 * e + 3], q[3 * e + 4]
+        S = ra * ra + ra * rb + rb * rb
+        dz = za - zb
+        grad[3 * e] += acc * math.pi / 3.0 * (2 * ra + rb) * dz
+        grad[3 * e + 3] += acc * math.pi / 3.0 * (ra + 2 * rb) * dz
+        grad[3 * e + 1] += acc * math.pi / 3.0 * S
+        grad[3 * e + 4] -= acc * math.pi / 3.0 * S
+    return lam
+
+
+@njit(cache=True, nogil=True)
 def flow_rate(Nd, g, v, u_frame):
     """Cavity volume rate grad V . v_rel, m^3/s, with axial velocities relative to u_frame."""
     Q = 0.0
@@ -886,8 +940,13 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     # the water inside: 1/2 rho Lambda Q^2 with Q = grad V . v_rel (docs/PHYSICS_SHELL.md,
     # "Experiment I"); Lagrange's equation gives the impulse rho Lambda (Q_end - Q_start) grad V
     rho_lam = P[P_RHO] * P[P_LAMBDA]
+    deforming = rho_lam > 0.0 and P[P_LAMBDA_DEFORMING] > 0.5
     g_end = np.zeros(n)
     q_end = np.zeros(n)
+    g_lam = np.zeros(n)
+    lam_start = P[P_LAMBDA]
+    lam_end = P[P_LAMBDA]
+    rho_lam_now = rho_lam  # the Newton matrix's inertia of the water inside
     for step in range(n_steps):
         t = time0 + step * dt
         for k in range(n):
@@ -955,6 +1014,8 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             if rho_lam > 0.0:
                 volume_grad(qn, n1, g_end)
                 q_start = flow_rate(Nd, g_end, vn, U if body else 0.0)
+                if deforming:
+                    lam_start = inertance(qn, n1, g_lam)
             fresh = False
             converged = False
             prev = 1e300
@@ -1004,9 +1065,26 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     for k in range(n):
                         v1[k] = vn[k] + (vs[k] - vn[k]) / alpha
                     u_end = U + (Us - U) / alpha if body else 0.0
-                    imp = rho_lam * (flow_rate(Nd, g_end, v1, u_end) - q_start)
+                    if deforming:
+                        lam_end = inertance(q_end, n1, g_lam)
+                    q_flow_end = flow_rate(Nd, g_end, v1, u_end)
+                    if deforming:
+                        imp = P[P_RHO] * (lam_end * q_flow_end - lam_start * q_start)
+                        rho_lam_now = P[P_RHO] * lam_end
+                    else:
+                        imp = rho_lam * (q_flow_end - q_start)
                     for k in range(n):
                         R[k] += imp * gf[k]  # the vehicle's row too: it carries the frame
+                    if deforming:
+                        # -1/2 rho Q^2 grad Lambda at the midpoint: the water resists a change of
+                        # shape that narrows its way out while it flows
+                        inertance(q1, n1, g_lam)
+                        q_mid = 0.0
+                        for k in range(n):
+                            q_mid += gf[k] * (vs[k] - (Us if k % 3 == 1 else 0.0))
+                        for k in range(n):
+                            if not fixed_dof(Nd, k) or (body and k == rz):
+                                R[k] -= dt * 0.5 * P[P_RHO] * q_mid * q_mid * g_lam[k]
                 state[tail + S_NIT] += 1.0
                 # backtracking line search on |R|: halve a Newton step that increased the residual
                 rnorm = 0.0
@@ -1030,7 +1108,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     band_solve(J, n, BW, wz, zz)
                 elif have_lu and (((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0):
                     # refresh the rank-one pressure correction for the reused factorisation
-                    pcoef = rank_one_coefficient(flags, st, P, dt, rho_lam / alpha)
+                    pcoef = rank_one_coefficient(flags, st, P, dt, rho_lam_now / alpha)
                     band_solve(J, n, BW, gf, zz)
                 if not have_lu:
                     fresh = True
@@ -1083,7 +1161,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         pcoef = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
                         band_solve(J, n, BW, wz, zz)
                     elif ((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0:
-                        pcoef = rank_one_coefficient(flags, st, P, dt, rho_lam / alpha)
+                        pcoef = rank_one_coefficient(flags, st, P, dt, rho_lam_now / alpha)
                         band_solve(J, n, BW, gf, zz)
                     have_lu = True
                 band_solve(J, n, BW, R, dv)
