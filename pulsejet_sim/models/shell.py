@@ -79,8 +79,9 @@ internal flow, ``Lambda`` the reference cavity's inertance (``Profile.internal_i
 by Lagrange's equation a uniform pressure ``-rho Lambda V''`` on the inner wall, stored in the
 ledger as ``stored_kinetic_internal_flow``.  ``one_dimensional_deforming`` (experiment J) takes
 ``Lambda`` of the current shape (``shell_kernels.inertance``): the pressure becomes
-``-rho (Lambda V')'`` and the wall also feels ``-1/2 rho V'^2 grad Lambda``, which resists a shape
-that narrows the water's way out while it flows.
+``-rho (Lambda V')'`` and the wall also feels ``+1/2 rho V'^2 grad Lambda``, Bernoulli's
+``-1/2 rho u^2``, which pulls a narrow section narrower while the water flows; a step that folds
+the meridian back along the axis stops the run (the 1-D flow is undefined there).
 
 *Axis contact.*  A deeply collapsed wall meets the opposite wall on the axis: below the contact
 radius ``min(h, r0/2)`` a conservative barrier (modulus E over the gap, log-barrier with a linear
@@ -200,6 +201,9 @@ ERR_TEXT = {
     sk.ERR_BOUNDS: 'state out of bounds (a node or its speed ran away)',
     sk.ERR_NEWTON: 'the implicit Newton solve did not converge even with 64 sub-steps; '
     'use a smaller dt_s',
+    sk.ERR_FOLD: 'the mantle folded back along the axis (an element reached zero axial extent): '
+    'the one-dimensional internal flow of fluid.internal_inertia: one_dimensional_deforming is '
+    'undefined there; use internal_inertia: one_dimensional or none',
 }
 
 

@@ -145,7 +145,7 @@ T_FREF = 12  # paper_code: the refilling force (<= 0), N
 N_STATS = 13
 
 # blow-up codes
-OK, ERR_NONFINITE, ERR_AXIS, ERR_BOUNDS, ERR_NEWTON = 0, 1, 2, 3, 4
+OK, ERR_NONFINITE, ERR_AXIS, ERR_BOUNDS, ERR_NEWTON, ERR_FOLD = 0, 1, 2, 3, 4, 5
 BW = 5  # half bandwidth of the dof ordering
 
 
@@ -839,6 +839,15 @@ def inertance(q, n1, grad):
 
 
 @njit(cache=True, nogil=True)
+def folded(q, n1):
+    """True where the meridian turns back along the axis (an element with z_e <= z_{e+1})."""
+    for e in range(n1 - 1):
+        if q[3 * e + 1] <= q[3 * e + 4]:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
 def flow_rate(Nd, g, v, u_frame):
     """Cavity volume rate grad V . v_rel, m^3/s, with axial velocities relative to u_frame."""
     Q = 0.0
@@ -1076,8 +1085,9 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     for k in range(n):
                         R[k] += imp * gf[k]  # the vehicle's row too: it carries the frame
                     if deforming:
-                        # -1/2 rho Q^2 grad Lambda at the midpoint: the water resists a change of
-                        # shape that narrows its way out while it flows
+                        # the wall feels +1/2 rho Q^2 grad Lambda (the residual's -dt ...): the
+                        # flowing water pulls a narrow section narrower, the -1/2 rho u^2 of
+                        # Bernoulli (docs/PHYSICS_SHELL.md, "Experiment J")
                         inertance(q1, n1, g_lam)
                         q_mid = 0.0
                         for k in range(n):
@@ -1247,6 +1257,9 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             code = _check(q1, v1, n1, P)
             if code != OK:
                 return step, code
+            if deforming and folded(q1, n1):
+                # the section is no longer a function of z: the 1-D internal flow is undefined
+                return step, ERR_FOLD
             state[tail + S_IN] += dt * st[T_PACT]
             state[tail + S_VISC] += dt * st[T_PVISC]
             state[tail + S_DRAG] += dt * (st[T_PDRAG] - dr * Us)
