@@ -840,7 +840,7 @@ def inertance(q, n1, grad):
 
 @njit(cache=True, nogil=True)
 def folded(q, n1):
-    """True where the meridian turns back along the axis (an element with z_e <= z_{e+1})."""
+    """Return whether the meridian turns back along the axis (an element with z_e <= z_{e+1})."""
     for e in range(n1 - 1):
         if q[3 * e + 1] <= q[3 * e + 4]:
             return True
