@@ -162,6 +162,24 @@ def test_the_cones_routine_spread_is_a_lagging_walls_stroke_rate():
         assert min(s['peak_times_s']) > 4.0 - 0.79  # in the last period of the slowest routine
 
 
+def rerun_one_case_of(key, name):
+    """
+    Read experiment ``key``'s stored tables (experiments_v2/) and rerun its case ``name``.
+
+    The rerun must match its stored row bit for bit, and the refined table must hold the same runs.
+    Returns the experiments module, the stored and refined rows and the study's run specs.
+    """
+    experiments = load_benchmark('paper000_experiments')
+    tables = study.OUT / 'experiments_v2'
+    stored = study.read_table(tables / f'{key}.csv')
+    refined = study.read_table(tables / f'{key}_refined.csv')
+    assert [r['run'] for r in stored] == [r['run'] for r in refined]
+    _, runs = load_sweep(study.SWEEP)
+    spec = experiments.EXPERIMENTS[key].change(next(r for r in runs if r.name == name))
+    assert_rerun_matches_stored(name, run_one(spec), next(r for r in stored if r['run'] == name))
+    return experiments, stored, refined, runs
+
+
 def spread(rows, **labels):
     """Fastest over slowest routine's peak speed of one mantle, stiffness and coupling."""
     speeds = [r['peak_speed_m_s'] for r in study.select(rows, **labels)]
@@ -184,16 +202,10 @@ def test_the_authors_hoop_tension_muscle_reproduces_no_internal_finding():
     in every one), while the 80 kPa cone, whose stroke is the same in every routine, spreads by
     about the square of the period ratio (inertia, not drag, limits a body that slow).
     """
-    experiments = load_benchmark('paper000_experiments')
-    tables = study.OUT / 'experiments_v2'
-    stored = study.read_table(tables / 'hoop_tension.csv')
-    refined = study.read_table(tables / 'hoop_tension_refined.csv')
+    experiments, stored, refined, _ = rerun_one_case_of(
+        'hoop_tension', 'internal/consistent/cone/E20k/T0.66'
+    )
     assert len(stored) == len(refined) == 36
-    assert [r['run'] for r in stored] == [r['run'] for r in refined]
-    _, runs = load_sweep(study.SWEEP)
-    name = 'internal/consistent/cone/E20k/T0.66'
-    row = run_one(experiments.hoop_tension(next(r for r in runs if r.name == name)))
-    assert_rerun_matches_stored(name, row, next(r for r in stored if r['run'] == name))
 
     for rows in (stored, refined):
         for coupling in ('paper', 'consistent'):
@@ -238,16 +250,10 @@ def test_the_water_inside_lets_the_paper_couplings_ellipsoid_resonate():
     sits between two routines, which come out equal), where the consistent coupling's cavity
     pressure flattens them.
     """
-    experiments = load_benchmark('paper000_experiments')
-    tables = study.OUT / 'experiments_v2'
-    stored = study.read_table(tables / 'internal_inertia.csv')
-    refined = study.read_table(tables / 'internal_inertia_refined.csv')
-    assert [r['run'] for r in stored] == [r['run'] for r in refined] == [r['run'] for r in STORED]
-    _, runs = load_sweep(study.SWEEP)
-    name = 'internal/paper/ellipsoid/E80k/T0.53'
-    spec = experiments.internal_inertia(next(r for r in runs if r.name == name))
-    row = run_one(spec)
-    assert_rerun_matches_stored(name, row, next(r for r in stored if r['run'] == name))
+    experiments, stored, refined, runs = rerun_one_case_of(
+        'internal_inertia', 'internal/paper/ellipsoid/E80k/T0.53'
+    )
+    assert [r['run'] for r in stored] == [r['run'] for r in STORED]
 
     for rows in (stored, refined):
         for coupling in ('paper', 'consistent'):
@@ -286,15 +292,10 @@ def test_the_water_inside_on_the_current_shape_folds_or_stops_the_study():
     finding holds in either coupling; about half the paper coupling's runs stop (folds and Newton
     failures at a closing lip), and every consistent run that stops stops on a fold.
     """
-    experiments = load_benchmark('paper000_experiments')
-    tables = study.OUT / 'experiments_v2'
-    stored = study.read_table(tables / 'internal_inertia_deforming.csv')
-    refined = study.read_table(tables / 'internal_inertia_deforming_refined.csv')
-    assert [r['run'] for r in stored] == [r['run'] for r in refined] == [r['run'] for r in STORED]
-    _, runs = load_sweep(study.SWEEP)
-    name = 'internal/consistent/ellipsoid/E80k/T0.53'
-    spec = experiments.internal_inertia_deforming(next(r for r in runs if r.name == name))
-    assert_rerun_matches_stored(name, run_one(spec), next(r for r in stored if r['run'] == name))
+    _, stored, refined, _ = rerun_one_case_of(
+        'internal_inertia_deforming', 'internal/consistent/ellipsoid/E80k/T0.53'
+    )
+    assert [r['run'] for r in stored] == [r['run'] for r in STORED]
 
     for rows in (stored, refined):
         for coupling in ('paper', 'consistent'):

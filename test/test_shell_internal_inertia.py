@@ -136,35 +136,21 @@ def test_the_option_off_keeps_the_ledger_and_the_motion_of_the_default():
 
 def _breathing(internal_inertia, perturbation_m=3e-3):
     """Let the study's 20 kPa ellipsoid (paper coupling, 500 Pa s) go from 3 mm inflated."""
-    scene = {
-        'model': 'shell',
-        'coupling': 'paper',
-        'simulation': {'dt_s': 1e-3, 'integrator': 'implicit_midpoint'},
-        'geometry': {
+    scene = cone_scene(
+        'paper',
+        1e-3,
+        elements=48,
+        actuation={'kind': 'none'},
+        geometry={
             'kind': 'ellipsoid',
             'semi_axis_axial_m': 0.08,
             'semi_axis_radial_m': 0.03,
             'opening_radius_m': 0.0125,
         },
-        'mesh': {'elements': 48},
-        'material': {
-            'youngs_modulus_pa': 20e3,
-            'viscosity_pa_s': 500.0,
-            'poisson_ratio': 0.0,
-            'half_thickness_m': 1e-3,
-            'density_kg_m3': 1100.0,
-        },
-        'fluid': {
-            'density_kg_m3': 1022.0,
-            'added_mass_coefficient': 1.1,
-            'tangential_drag_coefficient': 0.05,
-            'drag_coefficient': 1.7,
-            'internal_inertia': internal_inertia,
-        },
-        'jet': {'outlet': 'edge'},
-        'vehicle': {'mass_kg': 0.335},
-        'initial': {'radial_perturbation_m': perturbation_m},
-    }
+        initial={'radial_perturbation_m': perturbation_m},
+    )
+    scene['material']['youngs_modulus_pa'] = 20e3
+    scene['fluid']['internal_inertia'] = internal_inertia
     model = ShellModel.from_scene(scene)
     rest = ShellModel.from_scene(dict(scene, initial={'radial_perturbation_m': 0.0}))
     v0 = rest.ref.volume_m3()
