@@ -1115,7 +1115,7 @@ class ShellModel:
 
     def _linearised(self, state: np.ndarray):
         """
-        Return the free dofs' mass M, stiffness K = -dF/dq and damping C = -dF/dv at the state.
+        Return the free dofs and their mass M, stiffness K = -dF/dq and damping C = -dF/dv.
 
         Dense; the body held still (no vehicle dof); M carries the nodes' own and added mass, not
         the water inside (``linear_modes`` adds it).
@@ -1139,9 +1139,8 @@ class ShellModel:
             M[3 * i + 1, 3 * i + 1] = self.Nd[i, sk.N_MZZ]
             M[3 * i + 2, 3 * i + 2] = self.Nd[i, sk.N_MTT]
         idx = np.flatnonzero(free)
-        self._free_dofs = idx
         sub = np.ix_(idx, idx)
-        return M[sub], -K[sub], -C[sub]
+        return idx, M[sub], -K[sub], -C[sub]
 
     def linear_modes(self, state: np.ndarray) -> list[tuple[float, float]]:
         """
@@ -1152,11 +1151,11 @@ class ShellModel:
         With ``fluid.internal_inertia`` the water inside adds ``rho Lambda g g^T`` to M
         (g = grad V): its kinetic energy ``1/2 rho Lambda V'^2``.
         """
-        Mf, Kf, Cf = self._linearised(state)
+        free, Mf, Kf, Cf = self._linearised(state)
         if self.P[sk.P_LAMBDA] > 0.0:
             g = np.zeros(3 * self.n_nodes)
             sk.volume_grad(state[: 3 * self.n_nodes].copy(), self.n_nodes, g)
-            gf = g[self._free_dofs]
+            gf = g[free]
             Mf = Mf + self.P[sk.P_RHO] * self.inertance(state) * np.outer(gf, gf)
         n = Mf.shape[0]
         Minv = np.linalg.inv(Mf)
@@ -1180,7 +1179,7 @@ class ShellModel:
         """
         import scipy.linalg as sla
 
-        Mf, Kf, Cf = self._linearised(state)
+        _, Mf, Kf, Cf = self._linearised(state)
         Kf = 0.5 * (Kf + Kf.T)
         Cf = 0.5 * (Cf + Cf.T)
         w2 = float(np.max(sla.eigh(Kf, Mf, eigvals_only=True)))
