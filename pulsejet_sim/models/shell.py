@@ -521,7 +521,7 @@ class ShellModel:
             # nozzle would add a contraction whose inertance this reading does not give
             if outlet != 'edge' or code or integrator == 'verlet' or not terms['jet']:
                 raise ModelError(
-                    f'fluid.internal_inertia: one_dimensional is not available with '
+                    f'fluid.internal_inertia: {internal_inertia!r} is not available with '
                     f'coupling: {coupling}, jet.outlet: {outlet}, integrator: {integrator}, '
                     f'terms.jet: {str(terms["jet"]).lower()}; allowed: coupling paper or '
                     'consistent, jet.outlet: edge, an implicit integrator and the jet on '
