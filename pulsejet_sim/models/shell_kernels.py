@@ -1089,9 +1089,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         # flowing water pulls a narrow section narrower, the -1/2 rho u^2 of
                         # Bernoulli (docs/PHYSICS_SHELL.md, "Experiment J")
                         inertance(q1, n1, g_lam)
-                        q_mid = 0.0
-                        for k in range(n):
-                            q_mid += gf[k] * (vs[k] - (Us if k % 3 == 1 else 0.0))
+                        q_mid = st[T_VDOT]  # forces() took grad V . v_rel at (q*, v*) above
                         for k in range(n):
                             if not fixed_dof(Nd, k) or (body and k == rz):
                                 R[k] -= dt * 0.5 * P[P_RHO] * q_mid * q_mid * g_lam[k]
