@@ -45,6 +45,10 @@ I. internal_inertia: the water inside the mantle carries the inertia of paper 00
 J. internal_inertia_deforming: as I, with Lambda of the current shape instead of the reference
    (`one_dimensional_deforming`): the water resists a shape that narrows its way out while it flows
    (docs/PHYSICS_SHELL.md "Experiment J"; all 54 cases, both couplings; all findings).
+K. internal_momentum: as I, with that flow's momentum relative to the body too
+   (`fluid.internal_flow_momentum: true`: rho S V', S = int V_b/V dz; the vehicle feels
+   -rho S V'', in the consistent coupling the wall the pressure -rho S U'; docs/PHYSICS_SHELL.md
+   "Experiment K"; all 54 cases, both couplings; all findings).
 H. hoop_tension: the muscle as the authors' code drives it, an active hoop tension of 15 N/m
    times the routine's triangle on every section of the mantle (`zetas2_a = [0;0;0;0;0;-Ten]`,
    octopus_derivatives.m), instead of the study's desired-radius muscle: a radial pull of
@@ -175,6 +179,12 @@ def internal_inertia(spec: RunSpec) -> RunSpec:
 
 def internal_inertia_deforming(spec: RunSpec) -> RunSpec:
     return changed(spec, {'fluid': {'internal_inertia': 'one_dimensional_deforming'}})
+
+
+def internal_momentum(spec: RunSpec) -> RunSpec:
+    return changed(
+        spec, {'fluid': {'internal_inertia': 'one_dimensional', 'internal_flow_momentum': True}}
+    )
 
 
 @dataclass(frozen=True)
@@ -348,6 +358,25 @@ EXPERIMENTS = {
         "the mantle's edge, the nozzle, closes. By Lagrange's equation the wall feels "
         "`-rho (Lambda V')' grad V - 1/2 rho V'^2 grad Lambda`. Everything else is the study's; "
         'all 54 cases in both couplings.',
+    ),
+    'internal_momentum': Experiment(
+        'K',
+        "The water inside as in I, with that flow's momentum relative to the body",
+        'both',
+        internal_momentum,
+        COUPLINGS,
+        True,
+        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment K", before any '
+        "study run): experiment I's one-dimensional flow also carries the momentum "
+        "`rho S V'` relative to the body along +z, `S = int V_b/V dz` over the reference cavity "
+        '(ellipsoid 0.0732 m, cone 0.0395 m): the momentum balance of the body and the water '
+        "inside is `d/dt[(M + m_x + rho V) U + rho S V'] = T - D - ram`, of which the rocket "
+        "equation is the steady case. The vehicle feels `-rho S V''`; in the consistent "
+        "coupling the wall also feels the uniform pressure `-rho S U'` (Lagrange's equation of "
+        "the cross term `rho S U V'`); in the paper coupling the wall's body frame has no such "
+        "force and the ledger books the vehicle force's work as created. Everything else is "
+        "I's (the study's values with `internal_inertia: one_dimensional`); all 54 cases in "
+        'both couplings.',
     ),
 }
 

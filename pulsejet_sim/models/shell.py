@@ -82,6 +82,13 @@ ledger as ``stored_kinetic_internal_flow``.  ``one_dimensional_deforming`` (expe
 ``-rho (Lambda V')'`` and the wall also feels ``+1/2 rho V'^2 grad Lambda``, Bernoulli's
 ``-1/2 rho u^2``, which pulls a narrow section narrower while the water flows; a step that folds
 the meridian back along the axis stops the run (the 1-D flow is undefined there).
+``fluid.internal_flow_momentum: true`` (experiment K, with ``one_dimensional`` only) adds the
+same flow's momentum relative to the body, ``rho S V'`` along +z (``S = int V_b/V dz``,
+``Profile.internal_momentum_length_m``): the vehicle feels ``-rho S V''``; in the consistent
+coupling the wall also feels the uniform pressure ``-rho S U'`` (Lagrange's equation of the cross
+term ``rho S U V'``, stored as ``stored_kinetic_internal_cross``); in the paper coupling the
+wall's body frame has no such force and the ledger books the vehicle force's work as
+``created_unpaid_internal_momentum``.
 
 *Axis contact.*  A deeply collapsed wall meets the opposite wall on the axis: below the contact
 radius ``min(h, r0/2)`` a conservative barrier (modulus E over the gap, log-barrier with a linear
@@ -118,7 +125,8 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
                  tangential_drag_coefficient: 0.05, drag_coefficient: 1.0,
                  internal_inertia: none|one_dimensional|one_dimensional_deforming (the water
                  inside carries 1/2 rho Lambda V'^2, paper 001's 1-D internal flow, Lambda of
-                 the reference or of the current shape; outlet edge only)}
+                 the reference or of the current shape; outlet edge only),
+                 internal_flow_momentum: false (true: that flow's momentum rho S V' too)}
     jet:        {outlet: ring|edge|free_edge_fixed_nozzle, outlet_radius_m: ring/2 (not with edge),
                  inlet_area_m2: A_out + 3 pi (10 mm)^2,
                  thrust_coefficient: 1}
@@ -468,6 +476,7 @@ class ShellModel:
                 'tangential_drag_coefficient',
                 'drag_coefficient',
                 'internal_inertia',
+                'internal_flow_momentum',
             ),
         )
         rho = _num(fl, 'density_kg_m3', 'fluid', 1.0, 20000.0)
@@ -476,6 +485,19 @@ class ShellModel:
         Ct = _num(fl, 'tangential_drag_coefficient', 'fluid', 0.0, 10.0, default=0.05)
         Cd = _num(fl, 'drag_coefficient', 'fluid', 0.0, 10.0, default=1.0)
         internal_inertia = _choice(fl, 'internal_inertia', 'fluid', INTERNAL_INERTIA, 'none')
+        flow_momentum = fl.get('internal_flow_momentum', False)
+        if not isinstance(flow_momentum, bool):
+            raise ModelError(
+                f'fluid.internal_flow_momentum: {flow_momentum!r} is not a boolean; allowed: '
+                'true or false'
+            )
+        if flow_momentum and internal_inertia != 'one_dimensional':
+            # experiment K completes I's flow, whose S (like its Lambda) is the reference cavity's
+            raise ModelError(
+                f'fluid.internal_flow_momentum: true needs internal_inertia: one_dimensional '
+                f'(the scene has {internal_inertia!r}); allowed: internal_flow_momentum: false, '
+                'or internal_inertia: one_dimensional'
+            )
 
         jet = _section(scene, 'jet', required=terms['jet'])
         _unknown(jet, 'jet', ('outlet', 'outlet_radius_m', 'inlet_area_m2', 'thrust_coefficient'))
@@ -515,6 +537,7 @@ class ShellModel:
         )
         A_out = math.pi * r_out**2
         inertance = 0.0
+        momentum_length = 0.0
         if internal_inertia != 'none':
             # experiment I (docs/PHYSICS_SHELL.md): the 1-D flow of the water inside ends at the
             # cavity's own open section, so the jet must leave through the free edge; a smaller
@@ -527,7 +550,10 @@ class ShellModel:
                     'consistent, jet.outlet: edge, an implicit integrator and the jet on '
                     '(or internal_inertia: none)'
                 )
-            inertance = build_profile(geo, DENSE_ELEMENTS).internal_inertance_per_m()
+            dense = build_profile(geo, DENSE_ELEMENTS)
+            inertance = dense.internal_inertance_per_m()
+            if flow_momentum:
+                momentum_length = dense.internal_momentum_length_m()
         A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01**2)
         Cf = _num(jet, 'thrust_coefficient', 'jet', 0.0, 2.0, default=1.0)
 
@@ -766,6 +792,7 @@ class ShellModel:
         P[sk.P_PULSE] = PULSE_SHAPES[pulse]
         P[sk.P_LAMBDA] = inertance
         P[sk.P_LAMBDA_DEFORMING] = float(internal_inertia == 'one_dimensional_deforming')
+        P[sk.P_SMOM] = momentum_length
         P[sk.P_TC] = tc
         P[sk.P_TR] = tr
         P[sk.P_DT] = dt
@@ -1060,7 +1087,13 @@ class ShellModel:
         el = float(st[sk.T_EEL])
         # the water inside flowing towards the open end (0 unless fluid.internal_inertia is on)
         k_flow = 0.5 * float(self.P[sk.P_RHO] * self.inertance(state)) * float(st[sk.T_VDOT]) ** 2
-        return el + k_veh + k_out + float(kint) + k_flow, el, k_veh, k_out, float(kint), k_flow
+        k_cross = 0.0
+        if not self.flags & sk.F_PAPER:
+            # the earth-frame cross term rho S U V' of that flow (experiment K; 0 without it);
+            # the paper coupling's shell has no frame, its vehicle force is booked as created
+            k_cross = float(self.P[sk.P_RHO] * self.P[sk.P_SMOM]) * U * float(st[sk.T_VDOT])
+        total = el + k_veh + k_out + float(kint) + k_flow + k_cross
+        return total, el, k_veh, k_out, float(kint), k_flow, k_cross
 
     def inertance(self, state: np.ndarray) -> float:
         """Inertance of the water inside at ``state``, 1/m (0 without fluid.internal_inertia)."""
@@ -1070,7 +1103,7 @@ class ShellModel:
         return float(self.P[sk.P_LAMBDA])
 
     def energy_ledger(self, state: np.ndarray) -> dict[str, float]:
-        tot, el, kv, ko, ki, kf = self._stored(state)
+        tot, el, kv, ko, ki, kf, kc = self._stored(state)
         T = state[6 * self.n_nodes:]
         led = {
             'stored_elastic': el,
@@ -1086,11 +1119,16 @@ class ShellModel:
         }
         if self.P[sk.P_LAMBDA] > 0.0:
             led['stored_kinetic_internal_flow'] = kf
+        if self.P[sk.P_SMOM] > 0.0 and not self.flags & sk.F_PAPER:
+            led['stored_kinetic_internal_cross'] = kc
         out = led['out_jet_kinetic'] + led['out_drag'] + led['out_viscous'] + led['out_other']
         created = 0.0
         if self.flags & sk.F_PAPER:
             # not an input: the energy the paper's equations create, named (docs/PHYSICS_SHELL.md)
             created = led['created_unpaid_jet_kinetic'] = float(T[sk.S_CREATED])
+            if self.P[sk.P_SMOM] > 0.0:
+                led['created_unpaid_internal_momentum'] = float(T[sk.S_CREATED_MOM])
+                created += led['created_unpaid_internal_momentum']
         elif self.flags & sk.F_CODE:
             # experiment E (docs/PHYSICS_SHELL.md): the unpaid jet, and the work of the wall-borne
             # thrust, refill force and drag beyond what the books charge at the vehicle's speed

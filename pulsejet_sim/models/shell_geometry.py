@@ -65,20 +65,34 @@ class Profile:
         ``1/2 rho Q^2 Lambda`` with ``Lambda = int (V_b(z)/V)^2 / (pi r(z)^2) dz`` from the pole
         to the open end.  For paper 001's ellipsoid this is its ``m_b`` over ``(dV/db)^2``.
         """
-        r, z = self.r0, self.z0
-        dz = z[:-1] - z[1:]
-        if np.any(dz < 0.0):
-            raise ModelError(
-                'fluid.internal_inertia: one_dimensional needs a mantle whose axial position '
-                'falls monotonically from the pole to the open end (a one-dimensional flow '
-                'along the axis); this profile turns back; allowed: none'
-            )
-        behind = np.concatenate([[0.0], np.cumsum(self._frusta())])
-        flux = behind / behind[-1]
-        area = math.pi * r**2
-        f = np.zeros_like(r)
+        flux, dz = self._internal_flux('internal_inertia: one_dimensional')
+        area = math.pi * self.r0**2
+        f = np.zeros_like(self.r0)
         f[1:] = flux[1:] ** 2 / area[1:]
         return float(np.sum(0.5 * (f[:-1] + f[1:]) * dz))
+
+    def internal_momentum_length_m(self) -> float:
+        """
+        Length S, m, of the same flow's momentum: the water inside carries ``rho S V'`` along +z.
+
+        ``S = int (V_b(z)/V) dz`` from the open end to the pole: the flux ``V' V_b(z)/V`` through
+        each section, integrated over the axis, is the water's volume times its mean axial
+        velocity relative to the body (docs/PHYSICS_SHELL.md, "Experiment K").
+        """
+        flux, dz = self._internal_flux('internal_flow_momentum: true')
+        return float(np.sum(0.5 * (flux[:-1] + flux[1:]) * dz))
+
+    def _internal_flux(self, option: str) -> tuple[np.ndarray, np.ndarray]:
+        """Share V_b/V of the volume behind each node, and the nodes' axial steps dz, m."""
+        dz = self.z0[:-1] - self.z0[1:]
+        if np.any(dz < 0.0):
+            raise ModelError(
+                f'fluid.{option} needs a mantle whose axial position falls monotonically from '
+                'the pole to the open end (a one-dimensional flow along the axis); this profile '
+                'turns back; allowed: internal_inertia: none'
+            )
+        behind = np.concatenate([[0.0], np.cumsum(self._frusta())])
+        return behind / behind[-1], dz
 
 
 def _num(

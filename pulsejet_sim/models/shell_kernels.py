@@ -94,7 +94,10 @@ P_PULSE = 31  # the routine's pulse: PULSE_HALF_COSINE or PULSE_TRIANGLE
 P_LAMBDA = 32
 # 1: Lambda follows the current shape (fluid.internal_inertia: one_dimensional_deforming)
 P_LAMBDA_DEFORMING = 33
-N_PARAMS = 34
+# length S, m, of that flow's momentum relative to the body, rho S V' along +z
+# (fluid.internal_flow_momentum: true, experiment K; 0: left out)
+P_SMOM = 34
+N_PARAMS = 35
 PULSE_HALF_COSINE, PULSE_TRIANGLE = 0.0, 1.0
 
 # ---- element table E[e, :] -------------------------------------------------------------------
@@ -124,7 +127,8 @@ S_CREATED = 17  # paper coupling: the jet's kinetic energy that no wall force pa
 S_CREATED_WALL = (
     18  # paper_code: work of the wall-borne thrust, refill force and drag beyond the books, J
 )
-N_TAIL = 19
+S_CREATED_MOM = 19  # paper coupling, experiment K: work of the unreacted -rho S V'' on the body, J
+N_TAIL = 20
 
 # ---- stats returned by the force evaluation -------------------------------------------------
 T_EEL, T_PVISC, T_PDRAG, T_VOL, T_VDOT, T_P, T_PACT, T_FRING, T_RMAX, T_PCONT = (
@@ -888,17 +892,49 @@ def _check(q, v, n1, P):
 
 
 @njit(cache=True, nogil=True)
-def _paper_vehicle_midpoint(flags, st, U, alpha, dt, P):
+def _rank_three_correction(dv, gf, zz, ze, rz, c, s, n):
+    """
+    Turn dv = J^-1 R into (J + c g g^T + s (g e^T + e g^T))^-1 R (Woodbury, 2 x 2).
+
+    ``zz = J^-1 g``, ``ze = J^-1 e`` with ``e`` the vehicle's unit row ``rz``: I's rank one ``c``
+    and experiment K's symmetric cross term ``s = rho S / alpha`` between the wall and the vehicle.
+    """
+    a11 = 0.0
+    a12 = 0.0
+    gy = 0.0
+    for k in range(n):
+        a11 += gf[k] * zz[k]
+        a12 += gf[k] * ze[k]
+        gy += gf[k] * dv[k]
+    a21 = zz[rz]
+    a22 = ze[rz]
+    ey = dv[rz]
+    m00 = 1.0 + c * a11 + s * a21
+    m01 = c * a12 + s * a22
+    m10 = s * a11
+    m11 = 1.0 + s * a12
+    b0 = c * gy + s * ey
+    b1 = s * gy
+    det = m00 * m11 - m01 * m10
+    w0 = (b0 * m11 - m01 * b1) / det
+    w1 = (m00 * b1 - m10 * b0) / det
+    for k in range(n):
+        dv[k] -= w0 * zz[k] + w1 * ze[k]
+
+
+@njit(cache=True, nogil=True)
+def _paper_vehicle_midpoint(flags, st, U, alpha, dt, P, impulse):
     """
     Paper coupling: solve for the vehicle's midpoint speed U*.
 
-    U* of m (U* - U)/alpha = dt (T - D(U*) - ram(U*)), with the thrust T of the shell's midpoint
-    state (the shell does not feel U); scalar Newton.
+    U* of m (U* - U)/alpha = dt (T - D(U*) - ram(U*)) - impulse, with the thrust T of the shell's
+    midpoint state (the shell does not feel U); ``impulse`` is the step's change of the water
+    inside's momentum relative to the body (experiment K; 0 without it); scalar Newton.
     """
     Us = U
     for _ in range(20):
         a, thr, dr, ram, pj, po, m = body_terms(flags, st, Us, P)
-        g = m * (Us - U) / alpha - dt * (thr + dr - ram)
+        g = m * (Us - U) / alpha - dt * (thr + dr - ram) + impulse
         dg = m / alpha
         if flags & F_DRAG:
             dg += dt * P[P_CD] * P[P_RHO] * math.pi * st[T_RMAX] * st[T_RMAX] * abs(Us)
@@ -956,6 +992,10 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     lam_start = P[P_LAMBDA]
     lam_end = P[P_LAMBDA]
     rho_lam_now = rho_lam  # the Newton matrix's inertia of the water inside
+    # experiment K: that water's momentum relative to the body, rho S Q along +z
+    rho_s = P[P_RHO] * P[P_SMOM]
+    e_u = np.zeros(n)  # the vehicle's unit row, and J^-1 of it (consistent coupling)
+    ze = np.zeros(n)
     for step in range(n_steps):
         t = time0 + step * dt
         for k in range(n):
@@ -1084,6 +1124,14 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         imp = rho_lam * (q_flow_end - q_start)
                     for k in range(n):
                         R[k] += imp * gf[k]  # the vehicle's row too: it carries the frame
+                    if rho_s > 0.0 and body:
+                        # Lagrange's equation of the cross term rho S U Q: the wall feels the
+                        # uniform pressure -rho S U', the vehicle -rho S Q' (docs/PHYSICS_SHELL.md,
+                        # "Experiment K")
+                        du_ = (Us - U) / alpha
+                        for k in range(n):
+                            R[k] += rho_s * du_ * gf[k]
+                        R[rz] += rho_s * (q_flow_end - q_start)
                     if deforming:
                         # the wall feels +1/2 rho Q^2 grad Lambda (the residual's -dt ...): the
                         # flowing water pulls a narrow section narrower, the -1/2 rho u^2 of
@@ -1162,6 +1210,9 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                             J[k, BW] = 1.0
                     if not band_lu(J, n, BW):
                         return step, ERR_NEWTON
+                    if rho_s > 0.0 and body:
+                        e_u[rz] = 1.0
+                        band_solve(J, n, BW, e_u, ze)
                     # pressure rank one: + dt rho |V'|/A^2 g g^T
                     pcoef = 0.0
                     if (flags & F_JET) and (flags & F_CODE):
@@ -1173,7 +1224,9 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         band_solve(J, n, BW, gf, zz)
                     have_lu = True
                 band_solve(J, n, BW, R, dv)
-                if pcoef > 0.0:
+                if rho_s > 0.0 and body:
+                    _rank_three_correction(dv, gf, zz, ze, rz, pcoef, rho_s / alpha, n)
+                elif pcoef > 0.0:
                     gy = 0.0
                     gz = 0.0
                     for k in range(n):
@@ -1213,8 +1266,24 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
             Ush = Us  # the frame speed the shell's kinematics use (0 in the paper coupling)
             if flags & F_PAPER:
+                imp_mom = 0.0
+                if rho_s > 0.0:
+                    # experiment K: the water inside's momentum changes by rho S (Q_end - Q_start)
+                    # over the step, Q relative to the body (the frame the paper's shell lives in)
+                    for i in range(n1):
+                        q_end[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
+                        q_end[3 * i + 1] = qn[3 * i + 1] + dt * vs[3 * i + 1] * (
+                            1.0 - Nd[i, N_FIXZ]
+                        )
+                    volume_grad(q_end, n1, g_end)
+                    for k in range(n):
+                        v1[k] = vn[k] + (vs[k] - vn[k]) / alpha
+                    imp_mom = rho_s * (flow_rate(Nd, g_end, v1, 0.0) - q_start)
                 if flags & F_BODY:
-                    Us = _paper_vehicle_midpoint(flags, st, U, alpha, dt, P)
+                    Us = _paper_vehicle_midpoint(flags, st, U, alpha, dt, P, imp_mom)
+                    # no wall force reacts to it (the shell has no frame forces here): its work
+                    # on the vehicle is created or destroyed (docs/PHYSICS_SHELL.md, experiment K)
+                    state[tail + S_CREATED_MOM] -= imp_mom * Us
                 acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
                 # what the consistent wall pressure would have charged the shell for the outflow:
                 # the jet's kinetic energy flux in the body frame, 1/2 rho A u^3
