@@ -1187,7 +1187,8 @@ class ShellModel:
         Undamped natural frequency ``|lambda| / 2 pi`` and damping ratio ``-Re lambda / |lambda|``
         of each complex pair of ``M x'' + C x' + K x = 0``, lowest first; the body held still.
         With ``fluid.internal_inertia`` the water inside adds ``rho Lambda g g^T`` to M
-        (g = grad V): its kinetic energy ``1/2 rho Lambda V'^2``.
+        (g = grad V): its kinetic energy ``1/2 rho Lambda V'^2``.  Experiment K's momentum of that
+        water couples the wall to the body's speed only, so with the body held it adds nothing.
         """
         free, Mf, Kf, Cf = self._linearised(state)
         if self.P[sk.P_LAMBDA] > 0.0:
