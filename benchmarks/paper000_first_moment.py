@@ -80,7 +80,7 @@ def momentum_ratio(spec, refined: bool) -> dict:
 
 
 def peak_and_momentum(spec) -> dict:
-    """Return the peak speed of one run, its time and phase in the period, and rho S |V'|/m then."""
+    """Return the peak speed of a run, its time and phase in the period, and rho S |V'|/m then."""
     model = load_scene(spec.scene, dict(spec.overrides), replace=spec.replace).model
     state = model.initial_state()
     n1, dt = model.n_nodes, model.dt_s
@@ -128,7 +128,7 @@ def main() -> None:
     lines += [
         '',
         '| run | reading | peak (m/s) | at (s) | phase in the period | dV/dt then (m^3/s) | '
-        "rho S abs(dV/dt) / m then (m/s) |",
+        'rho S abs(dV/dt) / m then (m/s) |',
         '|---|---|---|---|---|---|---|',
     ]
     for name in ('internal/paper/ellipsoid/E80k/T0.53', 'internal/paper/ellipsoid/E80k/T0.66'):
