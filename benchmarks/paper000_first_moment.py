@@ -18,19 +18,16 @@ benchmarks/results/paper000_study/first_moment.md.
 
 from __future__ import annotations
 
-import datetime
 import math
-import os
 from pathlib import Path
-import platform
 import sys
 import time
-
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+import bench_common  # noqa: E402
+import numpy as np  # noqa: E402
 import paper000_experiments as experiments  # noqa: E402
 import paper000_study as study  # noqa: E402
 from pulsejet_sim.models import shell_kernels as sk  # noqa: E402
@@ -142,12 +139,12 @@ def main() -> None:
             print(row, flush=True)
             lines.append(row)
     wall = time.time() - started
-    stamp = datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
-    header = (
-        '# Experiment K: the exact momentum of the water inside over the one-dimensional one\n\n'
-        f'{stamp}, {platform.machine()}, {os.cpu_count()} cores, Python '
-        f'{platform.python_version()}; command `.venv/bin/python '
-        f'benchmarks/paper000_first_moment.py` ({wall:.0f} s wall).\n\n'
+    header = bench_common.header(
+        'Experiment K: the exact momentum of the water inside over the one-dimensional one',
+        'python benchmarks/paper000_first_moment.py',
+    )
+    header += (
+        f'One process, {wall:.0f} s wall.\n\n'
         + (__doc__ or '').split('\n\n')[1].replace('\n', ' ')
         + '\n\n'
     )
