@@ -862,6 +862,24 @@ def flow_rate(Nd, g, v, u_frame):
 
 
 @njit(cache=True, nogil=True)
+def end_of_step_flow(Nd, qn, vn, vs, u_mid, u_end, dt, alpha, q_end, g_end, v1):
+    """
+    Cavity volume rate at the end of an implicit step, m^3/s, from its end shape and velocities.
+
+    Fills ``q_end`` (shape, axial positions moved relative to the frame speed ``u_mid``),
+    ``g_end`` (grad V there) and ``v1`` (end velocities); ``u_end`` is the frame's end speed.
+    """
+    n1 = Nd.shape[0]
+    for i in range(n1):
+        q_end[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
+        q_end[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - u_mid) * (1.0 - Nd[i, N_FIXZ])
+    volume_grad(q_end, n1, g_end)
+    for k in range(3 * n1):
+        v1[k] = vn[k] + (vs[k] - vn[k]) / alpha
+    return flow_rate(Nd, g_end, v1, u_end)
+
+
+@njit(cache=True, nogil=True)
 def rank_one_coefficient(flags, st, P, dt, inertia):
     """
     Coefficient c of the Newton matrix's rank-one part c g g^T (g = grad V on the free dofs).
@@ -1104,19 +1122,12 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     else:
                         R[rz] = mb_ * (Us - U) / alpha - dt * (thr_ + dr_b - ram_ + st[T_FRING])
                 if rho_lam > 0.0:
-                    # end-of-step volume rate, from the end-of-step shape and velocities
-                    for i in range(n1):
-                        q_end[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
-                        q_end[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Us) * (
-                            1.0 - Nd[i, N_FIXZ]
-                        )
-                    volume_grad(q_end, n1, g_end)
-                    for k in range(n):
-                        v1[k] = vn[k] + (vs[k] - vn[k]) / alpha
                     u_end = U + (Us - U) / alpha if body else 0.0
+                    q_flow_end = end_of_step_flow(
+                        Nd, qn, vn, vs, Us, u_end, dt, alpha, q_end, g_end, v1
+                    )
                     if deforming:
                         lam_end = inertance(q_end, n1, g_lam)
-                    q_flow_end = flow_rate(Nd, g_end, v1, u_end)
                     if deforming:
                         imp = P[P_RHO] * (lam_end * q_flow_end - lam_start * q_start)
                         rho_lam_now = P[P_RHO] * lam_end
@@ -1270,15 +1281,10 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                 if rho_s > 0.0:
                     # experiment K: the water inside's momentum changes by rho S (Q_end - Q_start)
                     # over the step, Q relative to the body (the frame the paper's shell lives in)
-                    for i in range(n1):
-                        q_end[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
-                        q_end[3 * i + 1] = qn[3 * i + 1] + dt * vs[3 * i + 1] * (
-                            1.0 - Nd[i, N_FIXZ]
-                        )
-                    volume_grad(q_end, n1, g_end)
-                    for k in range(n):
-                        v1[k] = vn[k] + (vs[k] - vn[k]) / alpha
-                    imp_mom = rho_s * (flow_rate(Nd, g_end, v1, 0.0) - q_start)
+                    q_end_flow = end_of_step_flow(
+                        Nd, qn, vn, vs, 0.0, 0.0, dt, alpha, q_end, g_end, v1
+                    )
+                    imp_mom = rho_s * (q_end_flow - q_start)
                 if flags & F_BODY:
                     Us = _paper_vehicle_midpoint(flags, st, U, alpha, dt, P, imp_mom)
                     # no wall force reacts to it (the shell has no frame forces here): its work
