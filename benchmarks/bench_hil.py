@@ -3,6 +3,7 @@ Hardware-in-the-loop style benchmark: an external controller closes a loop on si
 
     .venv/bin/python benchmarks/bench_hil.py [--seconds 60] [--rates 100 500 1000]
                                              [--real-time-factor 1] [--no-write]
+                                             [--sim-executor single|events] [--atomic]
 
 For each state rate (sim_node `publish_rate_hz`), sim_node runs as a subprocess (real_time pacing)
 in an isolated ROS domain with localhost discovery, and this process is the controller: a
@@ -18,7 +19,9 @@ receive times (time.monotonic, one clock for both processes):
   - sim_node's own physics cost per step (mean of its /diagnostics),
   - the machine's floor over the same window: the wake-up lateness p99 of a process that only
     sleeps to a grid at the state rate (wake_floor.py); a latency needs two such wake-ups.
-Prints a markdown table and writes benchmarks/results/hil.md (header: date, nproc, python).
+--sim-executor sets sim_node's `executor` parameter; --atomic sends each command as one
+pulsejet/cmd/command message instead of two Float64s. Prints a markdown table and writes it at the
+top of benchmarks/results/hil.md (header: date, nproc, python), the earlier runs kept below.
 Not a test.
 """
 
@@ -47,12 +50,20 @@ JET = (0.0, 1.0)
 
 
 def run_rate(
-    rate_hz: float, seconds: float, rtf: float, scene: str, domain: int, log_dir: Path
+    rate_hz: float,
+    seconds: float,
+    rtf: float,
+    scene: str,
+    domain: int,
+    log_dir: Path,
+    atomic: bool = False,
+    sim_executor: str = 'single',
 ) -> dict:
     from diagnostic_msgs.msg import DiagnosticArray
     from pulsejet_sim.ros.executor import make_executor
     from pulsejet_sim.ros.harness import NodeProcess
-    from pulsejet_sim.ros.messages import command_from_applied
+    from pulsejet_sim.models.base import Command
+    from pulsejet_sim.ros.messages import command_from_applied, command_message
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
@@ -75,6 +86,7 @@ def run_rate(
             'real_time_factor': float(rtf),
             'publish_rate_hz': float(rate_hz),
             'start_paused': True,
+            'executor': sim_executor,
         },
         log_dir / f'sim_node.{int(rate_hz)}.log',
         env,
@@ -90,19 +102,26 @@ def run_rate(
     executor.add_node(node)
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
-    st = {'measuring': False, 'mode': None, 'pending': None, 'volume': None}
+    st = {'measuring': False, 'mode': None, 'pending': None, 'volume': None, 'time_s': 0.0}
     clock_recv, clock_time = [], []
     latency_state, latency_applied = [], []
     physics_us = []
-    pubs = {
-        'pump': node.create_publisher(Float64, 'pulsejet/cmd/pump_flow', qos),
-        'valve': node.create_publisher(Float64, 'pulsejet/cmd/valve', qos),
-    }
+    if atomic:  # one message sets pump and valve at the same step
+        pubs = {'command': node.create_publisher(JointState, 'pulsejet/cmd/command', qos)}
+    else:
+        pubs = {
+            'pump': node.create_publisher(Float64, 'pulsejet/cmd/pump_flow', qos),
+            'valve': node.create_publisher(Float64, 'pulsejet/cmd/valve', qos),
+        }
 
     def command(mode):
         st['mode'] = mode
-        pubs['valve'].publish(Float64(data=mode[1]))
-        pubs['pump'].publish(Float64(data=mode[0]))
+        if atomic:
+            cmd = Command(pump_flow_m3_s=mode[0], valve_opening=mode[1])
+            pubs['command'].publish(command_message(cmd, st['time_s']))
+        else:
+            pubs['valve'].publish(Float64(data=mode[1]))
+            pubs['pump'].publish(Float64(data=mode[0]))
         # pending: (target, publication wall time, applied stamp once seen, applied receipt)
         st['pending'] = [mode, time.monotonic(), None, None]
 
@@ -127,6 +146,7 @@ def run_rate(
     def on_clock(msg):
         now = time.monotonic()
         t = msg.clock.sec + msg.clock.nanosec * 1e-9
+        st['time_s'] = t
         if st['measuring']:
             clock_recv.append(now)
             clock_time.append(t)
@@ -248,6 +268,17 @@ def main(argv=None) -> int:
         '--domain-id', type=int, default=None, help='ROS domain (default 215 + pid %% 18)'
     )
     ap.add_argument('--no-write', action='store_true', help=f'do not write {RESULTS}')
+    ap.add_argument(
+        '--sim-executor',
+        default='single',
+        choices=('single', 'events'),
+        help="sim_node's executor parameter (default single, sim_node's default)",
+    )
+    ap.add_argument(
+        '--atomic',
+        action='store_true',
+        help='send pump and valve in one pulsejet/cmd/command message (default: two Float64s)',
+    )
     ap.add_argument('--note', default='', help='a line added under the header of the results file')
     args = ap.parse_args(argv)
     from pulsejet_sim.ros.harness import default_domain_id
@@ -258,7 +289,16 @@ def main(argv=None) -> int:
         for rate in args.rates:
             print(f'measuring {rate:g} Hz for {args.seconds:g} s ...', flush=True)
             results.append(
-                run_rate(rate, args.seconds, args.real_time_factor, args.scene, domain, Path(logs))
+                run_rate(
+                    rate,
+                    args.seconds,
+                    args.real_time_factor,
+                    args.scene,
+                    domain,
+                    Path(logs),
+                    atomic=args.atomic,
+                    sim_executor=args.sim_executor,
+                )
             )
     now = _dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
     header = (
@@ -267,9 +307,17 @@ def main(argv=None) -> int:
         f' {platform.machine()}, {platform.system()} {platform.release()}; python'
         f' {platform.python_version()}\ncommand: `benchmarks/bench_hil.py --seconds'
         f' {args.seconds:g} --rates {" ".join(f"{r:g}" for r in args.rates)} --real-time-factor'
-        f' {args.real_time_factor:g}`; scene {args.scene}, real_time pacing, {args.seconds:g} s'
-        f' measured per rate after 2 s of settling; controller: pump {PUMP_M3_S:g} m^3/s with the'
-        f' valve shut until volume > {V1_M3:g} m^3, then valve open until volume < {V0_M3:g} m^3\n'
+        f' {args.real_time_factor:g} --sim-executor {args.sim_executor}'
+        + (' --atomic' if args.atomic else '')
+        + f'`; scene {args.scene}, real_time pacing, sim_node executor {args.sim_executor},'
+        f' {args.seconds:g} s measured per rate after 2 s of settling; controller: pump'
+        f' {PUMP_M3_S:g} m^3/s with the valve shut until volume > {V1_M3:g} m^3, then valve open'
+        f' until volume < {V0_M3:g} m^3; each command '
+        + (
+            'one pulsejet/cmd/command message\n'
+            if args.atomic
+            else 'two messages, pulsejet/cmd/valve then pulsejet/cmd/pump_flow\n'
+        )
         + (f'\n{args.note}\n' if args.note else '')
     )
     legend = (
@@ -293,7 +341,12 @@ def main(argv=None) -> int:
     print(text)
     if not args.no_write:
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text(text)
+        earlier = RESULTS.read_text() if RESULTS.exists() else ''
+        if earlier:  # newest first; every earlier run stays below, one heading level down
+            earlier = '\n## Earlier run\n\n' + earlier.replace('\n## ', '\n### ').replace(
+                '# HIL benchmark', '### HIL benchmark', 1
+            )
+        RESULTS.write_text(text + earlier)
         print(f'written to {RESULTS}')
     return 0 if all(r['exit_code'] == 0 for r in results) else 1
 

@@ -514,20 +514,26 @@ def test_controller_target_volume_mode(start_node, probe):
 
 
 @pytest.mark.timeout(120)
-def test_lookahead_sends_every_state_once_in_order_through_a_reset(tmp_path):
+@pytest.mark.parametrize(
+    'executor_parameter',
+    [{}, {'executor': 'events'}],
+    ids=['single-threaded-executor', 'events-executor'],
+)
+def test_lookahead_sends_every_state_once_in_order_through_a_reset(tmp_path, executor_parameter):
     """
     With lookahead_s every state is sent once, in order, also through a reset.
 
     With lookahead_s the physics runs ahead and a publishing thread sends each state at its wall
     time: every period arrives once, in order, and a reset flushes the states computed ahead (they
-    are sent, not lost) before the clock goes back to 0.
+    are sent, not lost) before the clock goes back to 0. The same on the events executor
+    (sim_node's `executor` parameter), which answers the reset from its own queue.
     """
     from pulsejet_sim.ros.harness import SimHarness
 
     period = 0.02
     with SimHarness(
         scene='pump_cycle',
-        parameters={'publish_rate_hz': 1 / period, 'lookahead_s': 0.2},
+        parameters={'publish_rate_hz': 1 / period, 'lookahead_s': 0.2, **executor_parameter},
         log_dir=tmp_path,
     ) as h:
         from std_srvs.srv import Trigger

@@ -339,8 +339,9 @@ def test_harness_reports_a_failed_start(domain, tmp_path):
         ),
         ('watchdog_timeout_s', -1.0, 'watchdog_timeout_s out of range'),
         ('scene_overrides', '[1, 2]', 'allowed: empty or a YAML mapping'),
+        ('executor', 'multi', "executor='multi' rejected; allowed: one of events, single"),
     ],
-    ids=['pacing', 'watchdog', 'overrides'],
+    ids=['pacing', 'watchdog', 'overrides', 'executor'],
 )
 def test_bad_start_up_parameter_exits_2_with_the_reason(domain, tmp_path, param, value, expected):
     from pulsejet_sim.ros.harness import NodeProcess

@@ -17,17 +17,18 @@ at half the wall rate fired 63 times, not 50). controller_node schedules its com
 clock's own updates instead (a jump callback per /clock). Nor does it pass a subscription's
 message info (a two-argument callback raises SystemError), which the recorder's send times need.
 
-sim_node keeps the single-threaded executor: it serves events in arrival order, so under a flood
-of commands beyond the node's capacity (benchmarks/live_fuzz.py, 1.9 kHz of commands into the
-shell scene) a parameter or service request waited behind every queued message event: parameter
-dumps took up to 21 s (4 of 125 over 10 s; benchmarks/results/live_fuzz_events_executor.md),
-against at most 0.63 s with the single-threaded executor (live_fuzz.md), whose wait set takes each
-ready entity in turn. sim_node takes only commands (50-1000 a
-second in normal use), so the events executor's saving there is small; the controller and the
-recorder, which take the 1 kHz state, keep it.
+sim_node keeps the single-threaded executor by default. The events executor serves events in
+arrival order, so under a flood of commands beyond the node's capacity (benchmarks/live_fuzz.py,
+1.9 kHz of commands into the shell scene) a parameter or service request waited behind every
+queued message event: parameter dumps took up to 21 s (4 of 125 over 10 s;
+benchmarks/results/live_fuzz_events_executor.md), against at most 0.63 s with the single-threaded
+executor (live_fuzz.md), whose wait set takes each ready entity in turn. sim_node's parameter
+`executor:=events` trades that for speed: a 1 kHz closed loop's command reaches it in about half
+the time (benchmarks/results/hil.md), what hardware in the loop wants. The controller and the
+recorder, which take the 1 kHz state, use the events executor.
 
-`PULSEJET_EXECUTOR=single` selects the single-threaded executor everywhere (e.g. to rule the
-events executor out when chasing a bug).
+`PULSEJET_EXECUTOR=single` selects the single-threaded executor everywhere but in a sim_node given
+`executor:=events` (e.g. to rule the events executor out when chasing a bug).
 """
 
 from __future__ import annotations

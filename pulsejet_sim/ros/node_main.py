@@ -64,9 +64,11 @@ def run_node(
     """
     Create the node, spin until a signal or until ``node.done``, then close it.
 
-    Optional hooks on the node: ``start()`` after it joined the executor, ``done`` (bool),
-    ``exit_code`` (int, default 0), ``on_stop(signum or None)`` before closing, ``close()``.
-    executor_kind: `pulsejet_sim.ros.executor.make_executor`'s kind (default: its choice).
+    Optional hooks on the node: ``executor_kind`` (str, the node's own choice, e.g. from a
+    parameter), ``start()`` after it joined the executor, ``done`` (bool), ``exit_code`` (int,
+    default 0), ``on_stop(signum or None)`` before closing, ``close()``.
+    executor_kind: `pulsejet_sim.ros.executor.make_executor`'s kind when the node has none
+    (default: its choice).
     Returns the process exit code.
     """
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
@@ -85,7 +87,7 @@ def run_node(
 
     try:
         node = make_node()
-        executor = make_executor(kind=executor_kind)
+        executor = make_executor(kind=getattr(node, 'executor_kind', executor_kind))
         executor.add_node(node)
         if hasattr(node, 'start'):
             node.start()

@@ -43,7 +43,6 @@ from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
 GIL_SWITCH_INTERVAL_S = 2e-4
-SIM_NODE_EXECUTOR = 'single'
 #: command-rejection warnings: a burst of this many, then this many per second; the rest are only
 #: counted (commands_rejected in /diagnostics) and summed up in the next warning
 REJECTION_LOG_BURST = 10
@@ -63,6 +62,7 @@ class SimNode(Node):
         self._finished = False
         self.add_on_set_parameters_callback(self._on_set_parameters)
         p = params.declare(self)
+        self.executor_kind = p['executor']  # run_node spins the node on this executor
         self.scene = params.load_scene_from_parameters(self, p)
         rate = p['publish_rate_hz'] or float(
             getattr(self.scene, 'publish_rate_hz', 0.0) or params.DEFAULT_PUBLISH_RATE_HZ
@@ -277,10 +277,7 @@ def main(args=None):
     # executor thread is busy (CPython's default switch interval is 5 ms); the kernels release it
     # while stepping
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
-    # the single-threaded executor: under a command flood beyond the node's capacity it still
-    # serves services and parameters in turn, where the events executor queues them behind every
-    # message event (pulsejet_sim.ros.executor)
-    return run_node('sim_node', SimNode, args, executor_kind=SIM_NODE_EXECUTOR)
+    return run_node('sim_node', SimNode, args)
 
 
 if __name__ == '__main__':

@@ -33,6 +33,9 @@ shows them):
   watchdog_clock        (string, live)       sim (simulated seconds, reproducible) | wall (wall
                                              seconds)
   watchdog_action       (string, live)       safe (pump off, valve open, cable released) | hold
+  executor              (string, read-only)  single (default: services and parameters answered
+                                             in turn under a command flood) | events (about half
+                                             the command latency: hardware in the loop at 1 kHz)
   diagnostics_period_s  (double, read-only)  /diagnostics period in wall seconds; default 1
   odom_frame_id         (string, read-only)  header frame of `odom` (nav_msgs/Odometry); default
                                              odom
@@ -45,6 +48,7 @@ from typing import Any
 
 from pulsejet_sim.engine import session as eng
 from pulsejet_sim.interface import BASE_FRAME_ID, ODOM_FRAME_ID
+from pulsejet_sim.ros.executor import EXECUTOR_KINDS
 from pulsejet_sim.ros.node_params import (
     ParamSpec,
     scene_override_descriptor,
@@ -153,6 +157,14 @@ PARAMETERS = (
         'command age before the command watchdog trips (0 = off)',
         0.0,
         3600.0,
+    ),
+    ParamSpec(
+        'executor',
+        'single',
+        'the rclpy executor: single answers services and parameters in turn under a command '
+        'flood; events takes a command in about half the time (benchmarks/results/hil.md)',
+        choices=EXECUTOR_KINDS,
+        read_only=True,
     ),
     ParamSpec(
         'watchdog_clock',
