@@ -116,9 +116,11 @@ def run_rate(
 
     def command(mode):
         st['mode'] = mode
-        if atomic:
-            cmd = Command(pump_flow_m3_s=mode[0], valve_opening=mode[1])
-            pubs['command'].publish(command_message(cmd, st['time_s']))
+        if atomic:  # pump and valve only: a cable the scene may have is left as it is
+            msg = command_message(Command(mode[0], mode[1]), st['time_s'])
+            msg.name, msg.position = list(msg.name[:2]), list(msg.position[:2])
+            msg.velocity, msg.effort = list(msg.velocity[:2]), list(msg.effort[:2])
+            pubs['command'].publish(msg)
         else:
             pubs['valve'].publish(Float64(data=mode[1]))
             pubs['pump'].publish(Float64(data=mode[0]))
@@ -343,10 +345,13 @@ def main(argv=None) -> int:
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
         earlier = RESULTS.read_text() if RESULTS.exists() else ''
         if earlier:  # newest first; every earlier run stays below, one heading level down
-            earlier = '\n## Earlier run\n\n' + earlier.replace('\n## ', '\n### ').replace(
-                '# HIL benchmark', '### HIL benchmark', 1
-            )
-        RESULTS.write_text(text + earlier)
+            earlier = earlier.replace('\n## ', '\n### ')
+            if earlier.startswith('# HIL benchmark'):
+                earlier = '##' + earlier
+            earlier = '\n## Earlier run\n\n' + earlier
+        partial = RESULTS.with_suffix('.md.partial')  # an interrupted write keeps the old file
+        partial.write_text(text + earlier)
+        os.replace(partial, RESULTS)
         print(f'written to {RESULTS}')
     return 0 if all(r['exit_code'] == 0 for r in results) else 1
 

@@ -47,6 +47,18 @@ def test_the_events_executor_is_the_default_and_the_env_can_override_it(monkeypa
         make_executor(context=context)
 
 
+def test_events_asked_for_by_name_without_rclpy_support_is_refused_with_the_reason(
+    monkeypatch, context
+):
+    import sys
+
+    monkeypatch.delitem(sys.modules, 'rclpy.experimental', raising=False)
+    monkeypatch.setitem(sys.modules, 'rclpy.experimental', None)  # an rclpy without it
+    with pytest.raises(ValueError, match=r"executor 'events' rejected: this rclpy has no"):
+        make_executor(context=context, kind='events')
+    assert executor_kind() == 'single'  # the default falls back instead
+
+
 @pytest.mark.timeout(60)
 def test_a_wall_clock_timer_fires_once_per_period(context):
     node = rclpy.create_node('wall_timer', context=context)

@@ -515,11 +515,13 @@ def test_controller_target_volume_mode(start_node, probe):
 
 @pytest.mark.timeout(120)
 @pytest.mark.parametrize(
-    'executor_parameter',
-    [{}, {'executor': 'events'}],
+    'executor_parameter, executor_class',
+    [({}, 'SingleThreadedExecutor'), ({'executor': 'events'}, 'EventsExecutor')],
     ids=['single-threaded-executor', 'events-executor'],
 )
-def test_lookahead_sends_every_state_once_in_order_through_a_reset(tmp_path, executor_parameter):
+def test_lookahead_sends_every_state_once_in_order_through_a_reset(
+    tmp_path, executor_parameter, executor_class
+):
     """
     With lookahead_s every state is sent once, in order, also through a reset.
 
@@ -539,6 +541,7 @@ def test_lookahead_sends_every_state_once_in_order_through_a_reset(tmp_path, exe
         from std_srvs.srv import Trigger
 
         h.wait_for(lambda s: s.time_s >= 0.6, 60.0)
+        assert f"spinning on rclpy's {executor_class}" in h.output(), h.output()[-2000:]
         last_received = h.latest.time_s
         t_call = time.monotonic()
         message = h.call('reset', Trigger.Request()).message

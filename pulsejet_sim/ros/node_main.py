@@ -88,6 +88,7 @@ def run_node(
     try:
         node = make_node()
         executor = make_executor(kind=getattr(node, 'executor_kind', executor_kind))
+        node.get_logger().info(f"spinning on rclpy's {type(executor).__name__}")
         executor.add_node(node)
         if hasattr(node, 'start'):
             node.start()

@@ -34,8 +34,8 @@ shows them):
                                              seconds)
   watchdog_action       (string, live)       safe (pump off, valve open, cable released) | hold
   executor              (string, read-only)  single (default: services and parameters answered
-                                             in turn under a command flood) | events (about half
-                                             the command latency: hardware in the loop at 1 kHz)
+                                             in turn under a command flood) | events (a faster
+                                             closed loop: hardware in the loop at 1 kHz)
   diagnostics_period_s  (double, read-only)  /diagnostics period in wall seconds; default 1
   odom_frame_id         (string, read-only)  header frame of `odom` (nav_msgs/Odometry); default
                                              odom
@@ -159,14 +159,6 @@ PARAMETERS = (
         3600.0,
     ),
     ParamSpec(
-        'executor',
-        'single',
-        'the rclpy executor: single answers services and parameters in turn under a command '
-        'flood; events takes a command in about half the time (benchmarks/results/hil.md)',
-        choices=EXECUTOR_KINDS,
-        read_only=True,
-    ),
-    ParamSpec(
         'watchdog_clock',
         'sim',
         'what the watchdog measures the command age in: sim (simulated '
@@ -179,6 +171,15 @@ PARAMETERS = (
         'what the tripped watchdog does: safe = pump off, valve open, cable '
         'released; hold = keep the last command',
         choices=eng.WATCHDOG_ACTIONS,
+    ),
+    ParamSpec(
+        'executor',
+        'single',
+        'the rclpy executor: single answers services and parameters in turn under a command '
+        'flood; events answers a 1 kHz closed loop faster (median command-to-state latency '
+        'about half, benchmarks/results/hil.md) but queues them behind a flood',
+        choices=EXECUTOR_KINDS,
+        read_only=True,
     ),
     ParamSpec(
         'diagnostics_period_s',
