@@ -20,9 +20,8 @@ receive times (time.monotonic, one clock for both processes):
   - the machine's floor over the same window: the wake-up lateness p99 of a process that only
     sleeps to a grid at the state rate (wake_floor.py); a latency needs two such wake-ups.
 --sim-executor sets sim_node's `executor` parameter; --atomic sends each command as one
-pulsejet/cmd/command message instead of two Float64s. Prints a markdown table and writes it at the
-top of benchmarks/results/hil.md (header: date, nproc, python), the earlier runs kept below.
-Not a test.
+pulsejet/cmd/command message instead of two Float64s. Prints a markdown table and appends it to
+benchmarks/results/hil.md (newest last; header: date, nproc, python). Not a test.
 """
 
 from __future__ import annotations
@@ -36,9 +35,9 @@ import sys
 import tempfile
 import time
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_common import append  # noqa: E402
+import numpy as np  # noqa: E402
 import wake_floor  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -47,6 +46,25 @@ V0_M3, V1_M3 = 1.6e-3, 2.4e-3  # bang-bang band on the cavity volume
 PUMP_M3_S = 2.5e-3
 FILL = (PUMP_M3_S, 0.0)  # (pump flow, valve opening)
 JET = (0.0, 1.0)
+PUMP_AND_VALVE = ('pump_flow_m3_s', 'valve_opening')  # the actuators a mode sets
+TITLE = '# HIL benchmark (external bang-bang controller on sim_node state)\n'
+LEGEND = (
+    'jitter: |receive period of /clock - 1/rate|. latency: wall time from the publication of'
+    ' a command to the receipt of the first state computed with it (first /clock after the'
+    ' pulsejet/applied_command showing it), and to the receipt of that applied_command.'
+    ' physics cost: sim_node /diagnostics physics_us_per_step, mean. The controller decides on'
+    ' the state just received, i.e. right after a tick, so the command waits almost one'
+    ' publication period for the next tick: at 100 Hz the latency is about one period plus'
+    ' transport; at 500 and 1000 Hz transport and the queue of state messages both processes'
+    ' work through dominate. The cost per step grows at high rates because the batches get'
+    ' short (10 steps at 1000 Hz, 100 at 100 Hz) and the per-call overhead of Simulation.step'
+    ' is shared by fewer steps; on 2 cores the 1000 Hz stream is bounded by Python/DDS'
+    ' publishing in sim_node and receiving in the controller, not by the physics. machine'
+    ' floor: a process that only sleeps to a grid at the state rate, beside the measurement'
+    ' (benchmarks/wake_floor.py): how late it woke (p99) and its period jitter (p99); a'
+    ' command-to-state latency takes at least two wake-ups (sim_node on the command, the'
+    ' controller on the state), so its tail is no shorter than the floor.\n'
+)
 
 
 def run_rate(
@@ -60,10 +78,10 @@ def run_rate(
     sim_executor: str = 'single',
 ) -> dict:
     from diagnostic_msgs.msg import DiagnosticArray
+    from pulsejet_sim.models.base import Command
+    from pulsejet_sim.ros import messages
     from pulsejet_sim.ros.executor import make_executor
     from pulsejet_sim.ros.harness import NodeProcess
-    from pulsejet_sim.models.base import Command
-    from pulsejet_sim.ros.messages import command_from_applied, command_message
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
@@ -107,20 +125,19 @@ def run_rate(
     latency_state, latency_applied = [], []
     physics_us = []
     if atomic:  # one message sets pump and valve at the same step
-        pubs = {'command': node.create_publisher(JointState, 'pulsejet/cmd/command', qos)}
+        pubs = {'command': node.create_publisher(JointState, messages.TOPIC_CMD_COMMAND, qos)}
     else:
         pubs = {
-            'pump': node.create_publisher(Float64, 'pulsejet/cmd/pump_flow', qos),
-            'valve': node.create_publisher(Float64, 'pulsejet/cmd/valve', qos),
+            'pump': node.create_publisher(Float64, messages.TOPIC_CMD_PUMP_FLOW, qos),
+            'valve': node.create_publisher(Float64, messages.TOPIC_CMD_VALVE, qos),
         }
 
     def command(mode):
         st['mode'] = mode
         if atomic:  # pump and valve only: a cable the scene may have is left as it is
-            msg = command_message(Command(mode[0], mode[1]), st['time_s'])
-            msg.name, msg.position = list(msg.name[:2]), list(msg.position[:2])
-            msg.velocity, msg.effort = list(msg.velocity[:2]), list(msg.effort[:2])
-            pubs['command'].publish(msg)
+            pubs['command'].publish(
+                messages.command_message(Command(*mode), st['time_s'], fields=PUMP_AND_VALVE)
+            )
         else:
             pubs['valve'].publish(Float64(data=mode[1]))
             pubs['pump'].publish(Float64(data=mode[0]))
@@ -141,7 +158,7 @@ def run_rate(
         p = st['pending']
         if p is None or p[2] is not None:
             return
-        t, cmd = command_from_applied(msg)
+        t, cmd = messages.command_from_applied(msg)
         if (cmd.pump_flow_m3_s, cmd.valve_opening) == p[0]:
             p[2], p[3] = t, time.monotonic()
 
@@ -168,13 +185,13 @@ def run_rate(
                 except ValueError:
                     pass
 
-    node.create_subscription(Float64, 'pulsejet/volume', on_volume, qos)
-    node.create_subscription(JointState, 'pulsejet/applied_command', on_applied, qos)
-    node.create_subscription(Clock, '/clock', on_clock, qos)
-    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, qos)
+    node.create_subscription(Float64, messages.TOPIC_VOLUME, on_volume, qos)
+    node.create_subscription(JointState, messages.TOPIC_APPLIED_COMMAND, on_applied, qos)
+    node.create_subscription(Clock, messages.TOPIC_CLOCK, on_clock, qos)
+    node.create_subscription(DiagnosticArray, messages.TOPIC_DIAGNOSTICS, on_diagnostics, qos)
     from std_srvs.srv import SetBool
 
-    pause = node.create_client(SetBool, 'pulsejet/pause')
+    pause = node.create_client(SetBool, messages.SERVICE_PAUSE)
 
     def spin_until(pred, timeout, what):
         end = time.monotonic() + timeout
@@ -257,6 +274,8 @@ def table(results: list[dict], rtf: float) -> str:
 
 
 def main(argv=None) -> int:
+    from pulsejet_sim.ros.executor import EXECUTOR_KINDS
+
     ap = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
     ap.add_argument(
         '--seconds', type=float, default=60.0, help='wall seconds measured per rate (default 60)'
@@ -273,7 +292,7 @@ def main(argv=None) -> int:
     ap.add_argument(
         '--sim-executor',
         default='single',
-        choices=('single', 'events'),
+        choices=EXECUTOR_KINDS,
         help="sim_node's executor parameter (default single, sim_node's default)",
     )
     ap.add_argument(
@@ -304,8 +323,7 @@ def main(argv=None) -> int:
             )
     now = _dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
     header = (
-        f'# HIL benchmark (external bang-bang controller on sim_node state)\n\ndate: {now};'
-        f' machine: nproc {len(os.sched_getaffinity(0))} ({os.cpu_count()} CPUs),'
+        f'date: {now}; machine: nproc {len(os.sched_getaffinity(0))} ({os.cpu_count()} CPUs),'
         f' {platform.machine()}, {platform.system()} {platform.release()}; python'
         f' {platform.python_version()}\ncommand: `benchmarks/bench_hil.py --seconds'
         f' {args.seconds:g} --rates {" ".join(f"{r:g}" for r in args.rates)} --real-time-factor'
@@ -322,37 +340,11 @@ def main(argv=None) -> int:
         )
         + (f'\n{args.note}\n' if args.note else '')
     )
-    legend = (
-        '\njitter: |receive period of /clock - 1/rate|. latency: wall time from the publication of'
-        ' a command to the receipt of the first state computed with it (first /clock after the'
-        ' pulsejet/applied_command showing it), and to the receipt of that applied_command.'
-        ' physics cost: sim_node /diagnostics physics_us_per_step, mean. The controller decides on'
-        ' the state just received, i.e. right after a tick, so the command waits almost one'
-        ' publication period for the next tick: at 100 Hz the latency is about one period plus'
-        ' transport; at 500 and 1000 Hz transport and the queue of state messages both processes'
-        ' work through dominate. The cost per step grows at high rates because the batches get'
-        ' short (10 steps at 1000 Hz, 100 at 100 Hz) and the per-call overhead of Simulation.step'
-        ' is shared by fewer steps; on 2 cores the 1000 Hz stream is bounded by Python/DDS'
-        ' publishing in sim_node and receiving in the controller, not by the physics. machine'
-        ' floor: a process that only sleeps to a grid at the state rate, beside the measurement'
-        ' (benchmarks/wake_floor.py): how late it woke (p99) and its period jitter (p99); a'
-        ' command-to-state latency takes at least two wake-ups (sim_node on the command, the'
-        ' controller on the state), so its tail is no shorter than the floor.\n'
-    )
-    text = header + '\n' + table(results, args.real_time_factor) + '\n' + legend
-    print(text)
+    section = f'\n## {now}\n\n' + header + '\n' + table(results, args.real_time_factor) + '\n'
+    print(TITLE + section + '\n' + LEGEND)
     if not args.no_write:
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        earlier = RESULTS.read_text() if RESULTS.exists() else ''
-        if earlier:  # newest first; every earlier run stays below, one heading level down
-            earlier = earlier.replace('\n## ', '\n### ')
-            if earlier.startswith('# HIL benchmark'):
-                earlier = '##' + earlier
-            earlier = '\n## Earlier run\n\n' + earlier
-        partial = RESULTS.with_suffix('.md.partial')  # an interrupted write keeps the old file
-        partial.write_text(text + earlier)
-        os.replace(partial, RESULTS)
-        print(f'written to {RESULTS}')
+        append(RESULTS, f'{TITLE}\nNewest last. {LEGEND}', section)
+        print(f'appended to {RESULTS}')
     return 0 if all(r['exit_code'] == 0 for r in results) else 1
 
 

@@ -9,7 +9,7 @@ namespace applies), except `/clock`. Every header is stamped with simulation tim
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -266,31 +266,49 @@ def command_messages(cmd: Command) -> list[tuple[str, Float64]]:
     ]
 
 
+def _actuator_message(
+    cmd: Command, names: Sequence[str], time_s: float, frame_id: str
+) -> JointState:
+    msg = JointState()
+    msg.header.stamp = stamp(time_s)
+    msg.header.frame_id = frame_id
+    msg.name = list(names)
+    msg.position = [float(getattr(cmd, name)) for name in names]
+    # Filled, not empty: rosbags (0.11) misreads the padding rclpy writes for empty trailing
+    # float64 sequences.
+    msg.velocity = [0.0] * len(names)
+    msg.effort = [0.0] * len(names)
+    return msg
+
+
 def applied_command_message(cmd: Command, time_s: float, frame_id: str = FRAME_ID) -> JointState:
     """
     Return the command held from time_s (simulation time) on.
 
     A JointState with names APPLIED_COMMAND_NAMES and the values in `position` (m^3/s, 0..1, N).
     """
-    msg = JointState()
-    msg.header.stamp = stamp(time_s)
-    msg.header.frame_id = frame_id
-    msg.name = list(APPLIED_COMMAND_NAMES)
-    msg.position = [float(cmd.pump_flow_m3_s), float(cmd.valve_opening), float(cmd.cable_force_n)]
-    # Filled, not empty: rosbags (0.11) misreads the padding rclpy writes for empty trailing
-    # float64 sequences.
-    msg.velocity = [0.0] * len(APPLIED_COMMAND_NAMES)
-    msg.effort = [0.0] * len(APPLIED_COMMAND_NAMES)
-    return msg
+    return _actuator_message(cmd, APPLIED_COMMAND_NAMES, time_s, frame_id)
 
 
-def command_message(cmd: Command, time_s: float, frame_id: str = FRAME_ID) -> JointState:
+def command_message(
+    cmd: Command,
+    time_s: float,
+    frame_id: str = FRAME_ID,
+    fields: Sequence[str] = APPLIED_COMMAND_NAMES,
+) -> JointState:
     """
     Return the atomic command (TOPIC_CMD_COMMAND) answering the state at time_s.
 
-    It carries every actuator at once.
+    It sets the actuators named in `fields` (default all of APPLIED_COMMAND_NAMES) at once; the
+    others keep what they hold.
     """
-    return applied_command_message(cmd, time_s, frame_id)
+    unknown = [f for f in fields if f not in APPLIED_COMMAND_NAMES]
+    if unknown or not fields or len(set(fields)) != len(fields):
+        raise ValueError(
+            f'fields {list(fields)!r} rejected; allowed: distinct names from '
+            f'{", ".join(APPLIED_COMMAND_NAMES)}, at least one'
+        )
+    return _actuator_message(cmd, fields, time_s, frame_id)
 
 
 def command_values(msg: Any) -> tuple[float, dict[str, float]]:
