@@ -3,7 +3,7 @@
 
 `pulsejet run SCENE`, `pulsejet summary FILE.mcap`, `pulsejet plot FILE.mcap`, `pulsejet animate
 FILE.mcap`, `pulsejet resim FILE.mcap`, `pulsejet repair FILE.mcap`, `pulsejet sweep SWEEP`,
-`pulsejet fit FIT`, `pulsejet optimize OPT`, `pulsejet scenes`.
+`pulsejet fit FIT`, `pulsejet optimize OPT`, `pulsejet validate [CASE...]`, `pulsejet scenes`.
 """
 
 from __future__ import annotations
@@ -100,6 +100,10 @@ COMMANDS = {
     'optimize': (
         'search scene parameters (differential evolution) on a process pool or Dask',
         _lazy('optimize', 'main_optimize'),
+    ),
+    'validate': (
+        'predicted against measured figures of real robots: docs/validation/ report',
+        _lazy('validation', 'main_validate'),
     ),
     'scenes': ('list the scenes under config/', _scenes),
 }

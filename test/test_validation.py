@@ -1,0 +1,84 @@
+"""The validation suite: one case rerun to its stored row, the verdict rules, the case checks."""
+
+from __future__ import annotations
+
+import json
+import math
+
+from pulsejet_sim import validation
+import pytest
+
+# the smallest case (lumped, one deflation): its stored row is what the model does today,
+# including where it misses the measured figures
+RERUN_CASE = 'escape_weymouth2015'
+
+
+def stored_results() -> dict:
+    return json.loads((validation.OUT_DIR / 'results.json').read_text())['cases']
+
+
+def test_rerun_matches_stored_row():
+    case = validation.load_case(validation.CASES_DIR / f'{RERUN_CASE}.yaml')
+    result, trace = validation.run_case(case, refine=False, probes=False)
+    stored = stored_results()[RERUN_CASE]
+    assert validation.figure_rows(result) == validation.figure_rows(stored)
+    for new, old in zip(result['figures'], stored['figures']):
+        assert new['verdict'] == old['verdict']
+        assert new['predicted'] == pytest.approx(old['predicted'], rel=1e-9)
+    # the budget is the ledger's: it closes over the interval to the run's rounding, and the
+    # stored energy at t = 0 is the only input of a deflation
+    budget = result['budget']['terms_j']
+    given = budget['in_initial'] + budget['in_actuation_work']
+    assert budget['in_actuation_work'] == 0.0
+    assert abs(result['budget']['closure_j']) < 1e-9 * given
+    assert budget['in_initial'] == pytest.approx(stored['budget']['terms_j']['in_initial'])
+
+
+def test_every_case_is_valid_and_every_stored_case_has_a_plot():
+    stored = stored_results()
+    for path in validation.case_paths():
+        case = validation.load_case(path)
+        assert case['source'].strip()
+        assert case['id'] in stored, f'{case["id"]} has no stored row: run pulsejet validate'
+        assert (validation.OUT_DIR / f'{case["id"]}.png').is_file()
+        rows = {r['figure'] for r in stored[case['id']]['figures']}
+        assert rows == {f['id'] for f in case['figures']}
+
+
+def test_report_includes_every_stored_row():
+    report = (validation.OUT_DIR / 'report.md').read_text()
+    for result in stored_results().values():
+        for row in validation.figure_rows(result):
+            assert row in report
+
+
+@pytest.mark.parametrize(
+    'comparison, predicted, expected',
+    [
+        ('value', 1.24, 'pass'),
+        ('value', 0.76, 'pass'),
+        ('value', 1.26, 'miss'),
+        ('value', 0.74, 'miss'),
+        ('at_least', 0.76, 'pass'),
+        ('at_least', 5.0, 'pass'),
+        ('at_least', 0.74, 'miss'),
+        ('at_most', 1.24, 'pass'),
+        ('at_most', 0.01, 'pass'),
+        ('at_most', 1.26, 'miss'),
+        ('value', None, 'miss'),
+        ('value', math.nan, 'miss'),
+    ],
+)
+def test_verdict_rules(comparison, predicted, expected):
+    fig = {'measured': 1.0, 'tolerance_relative': 0.25, 'comparison': comparison}
+    assert validation.verdict(fig, predicted)[0] == expected
+
+
+def test_bad_case_names_the_key(tmp_path):
+    text = (validation.CASES_DIR / f'{RERUN_CASE}.yaml').read_text()
+    bad = tmp_path / f'{RERUN_CASE}.yaml'
+    bad.write_text(text.replace('comparison: at_least', 'comparison: roughly'))
+    with pytest.raises(validation.ValidationCaseError, match='comparison.*roughly.*at_least'):
+        validation.load_case(bad)
+    with pytest.raises(validation.ValidationCaseError, match="'no_such_case' not found"):
+        validation.case_paths(['no_such_case'])
