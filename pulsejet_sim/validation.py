@@ -426,6 +426,41 @@ def _scene(case: dict, extra: dict | None = None):
         raise ValidationCaseError(f'{case["id"]}: {err}') from None
 
 
+def refinement(case: dict, scene, values: dict, run: dict) -> list[dict]:
+    """
+    Rerun the case on finer discretisations: step dt/2 and dt/4; a shell also 2x and 4x elements.
+
+    Each series gives the figures and, from the three levels, the observed order
+    p = log2(|f1 - f2| / |f2 - f3|) where the differences are above rounding (None otherwise).
+    """
+    dt = scene.model.dt_s
+    series = [('step', [{'simulation': {'dt_s': dt / 2}}, {'simulation': {'dt_s': dt / 4}}])]
+    mesh = scene.data.get('mesh') if isinstance(scene.data.get('mesh'), dict) else None
+    if mesh and 'elements' in mesh:
+        n = int(mesh['elements'])
+        series.append(('elements', [{'mesh': {'elements': 2 * n}}, {'mesh': {'elements': 4 * n}}]))
+    out = []
+    for name, levels in series:
+        runs = []
+        for ov in levels:
+            trace = run_trace(
+                _scene(case, ov), float(run['duration_s']), float(run['sample_period_s'])
+            )
+            figures = figures_of(case, trace)[0]
+            runs.append({'overrides': ov, 'fault': trace.fault, 'figures': figures})
+        order = {}
+        for key, f1 in values.items():
+            f2, f3 = (r['figures'].get(key) for r in runs)
+            if None in (f1, f2, f3):
+                order[key] = None
+                continue
+            d12, d23 = abs(f1 - f2), abs(f2 - f3)
+            tiny = 1e-9 * max(abs(f1), 1e-300)
+            order[key] = math.log2(d12 / d23) if d12 > tiny and d23 > tiny else None
+        out.append({'series': name, 'levels': runs, 'observed_order': order})
+    return out
+
+
 def run_case(case: dict, refine: bool = True, probes: bool = True) -> tuple[dict, Trace]:
     """Run one case: figures with verdicts, steady check, budget, dt/2 rerun, probes."""
     run = case['run']
@@ -477,10 +512,7 @@ def run_case(case: dict, refine: bool = True, probes: bool = True) -> tuple[dict
             'change_relative': (now - before) / now if now else None,
         }
     if refine:
-        fine_scene = _scene(case, {'simulation': {'dt_s': scene.model.dt_s / 2}})
-        fine = run_trace(fine_scene, float(run['duration_s']), float(run['sample_period_s']))
-        fine_values, _ = figures_of(case, fine)
-        out['refined'] = {'dt_s': fine.dt_s, 'fault': fine.fault, 'figures': fine_values}
+        out['refinement'] = refinement(case, scene, values, run)
     out['probes'] = []
     if probes:
         for probe in case.get('probes') or []:
@@ -563,8 +595,9 @@ def budget_table(result: dict) -> list[str]:
     if pay:
         lines.append('')
         lines.append(
-            f'Payload kinetic energy: measured {_g(pay["payload_kinetic_measured_j"])} J, '
-            f'predicted {_g(pay["payload_kinetic_predicted_j"])} J'
+            'Kinetic energy of the measured payload: at the measured speed '
+            f'{_g(pay["payload_kinetic_measured_j"])} J, at the predicted speed '
+            f'{_g(pay["payload_kinetic_predicted_j"])} J'
             + (
                 f' ({100 * pay["payload_fraction_predicted"]:.0f} % of the model\'s input)'
                 if 'payload_fraction_predicted' in pay
@@ -693,17 +726,22 @@ def _case_section(result: dict) -> list[str]:
             f'{sc["mean_velocity_previous"]:.4g} m/s over the cycles before '
             f'({_pct(sc["change_relative"])}).'
         )
-    ref = result.get('refined')
-    if ref:
+    for ser in result.get('refinement', []):
         parts = []
         for r in result['figures']:
-            fine = ref['figures'].get(r['figure'])
-            if r['predicted'] is None or fine is None:
-                parts.append(f'{r["figure"]} {_g(fine)}')
-            else:
-                d = (r['predicted'] - fine) / fine if fine else 0.0
-                parts.append(f'{r["figure"]} {_g(fine)} (the dt run differs by {_pct(d)})')
-        lines.append(f'At dt/2 = {ref["dt_s"]:g} s: ' + ', '.join(parts) + '.')
+            name = r['figure']
+            vals = [r['predicted']] + [lv['figures'].get(name) for lv in ser['levels']]
+            p = ser['observed_order'].get(name)
+            rel = (
+                _pct((vals[0] - vals[-1]) / vals[-1])
+                if None not in vals and vals[-1]
+                else 'n/a'
+            )
+            order = f', observed order {p:.2f}' if p is not None else ''
+            levels = ' / '.join(_g(v) for v in vals)
+            parts.append(f'{name} {levels} (stored vs finest {rel}{order})')
+        what = {'step': 'step dt, dt/2, dt/4', 'elements': 'elements n, 2n, 4n'}[ser['series']]
+        lines.append(f'Refinement ({what}): ' + '; '.join(parts) + '.')
     lines += ['', f'![{result["id"]}]({result["id"]}.png)', '', '### Energy budget', '']
     lines += budget_table(result)
     if result['probes']:
