@@ -82,3 +82,13 @@ def test_bad_case_names_the_key(tmp_path):
         validation.load_case(bad)
     with pytest.raises(validation.ValidationCaseError, match="'no_such_case' not found"):
         validation.case_paths(['no_such_case'])
+
+
+def test_cases_of_one_robot_share_its_scene_and_parameters():
+    by_robot: dict = {}
+    for path in validation.case_paths():
+        case = validation.load_case(path)
+        key = (case['scene'], json.dumps(case.get('overrides') or {}, sort_keys=True))
+        by_robot.setdefault(case['robot'], set()).add(key)
+    assert by_robot['cable_robot'] == {('shell_robot', '{}')}
+    assert all(len(keys) == 1 for keys in by_robot.values()), by_robot
