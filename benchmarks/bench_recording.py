@@ -60,7 +60,7 @@ def record(name: str, duration_s: float, out: Path) -> float:
 
 
 def record_with_rclpy(name: str, duration_s: float, out: Path) -> float:
-    """The runner's recording as it was: an rclpy message per sample, serialised by rclpy."""
+    """Record as the runner did before bag.cdr: an rclpy message per sample, rclpy-serialised."""
     from pulsejet_sim.bag.writer import BagWriter
     from pulsejet_sim.ros import messages
 

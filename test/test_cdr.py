@@ -95,13 +95,13 @@ def observations():
         sim = Simulation(load_scene(name).model)
         out.append((sim, sim.observe()))
         out.append((sim, sim.step(7, sim.command)))
-    values = dict(
+    edge = Observation(
         time_s=1234.567891234, position_m=-0.1, velocity_m_s=-1e-300, acceleration_m_s2=0.0,
         mantle_radius_m=1e300, volume_m3=5e-324, fluid_mass_kg=-0.0, thrust_n=math.pi,
         added_mass_force_n=0.0, drag_n=0.0, jet_speed_m_s=0.0, cavity_pressure_pa=0.0,
         pump_flow_m3_s=0.0, valve_opening=0.0,
     )
-    out.append((None, Observation(**values)))
+    out.append((None, edge))
     return out
 
 

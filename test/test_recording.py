@@ -23,6 +23,7 @@ from rosbags.typesys import get_typestore, Stores
 
 
 class _FixedClock(datetime.datetime):
+
     @classmethod
     def now(cls, tz=None):
         return datetime.datetime(2026, 1, 2, 3, 4, 5, 678901, tzinfo=tz)
@@ -30,7 +31,7 @@ class _FixedClock(datetime.datetime):
 
 @pytest.fixture
 def fixed_close_time(monkeypatch):
-    """The rosbag2 metadata's closed_at, so two files written at different times compare."""
+    """Fix the rosbag2 metadata's closed_at, so two files written at different times compare."""
     monkeypatch.setattr(
         bag_writer, 'datetime',
         types.SimpleNamespace(datetime=_FixedClock, timezone=datetime.timezone),
@@ -136,5 +137,5 @@ def test_a_recorded_run_opens_in_rosbags_with_every_topic_and_matches_the_physic
     info = bag_info(out)
     assert info.topics == expected and not info.damaged
     assert info.counts == {t: len(decoded[t]) for t in expected}
-    own = [msg.twist.linear.x for topic, _, _, msg in read_bag(out) if topic == '/pulsejet/velocity']
+    own = [m.twist.linear.x for topic, _, _, m in read_bag(out) if topic == '/pulsejet/velocity']
     assert own == velocity

@@ -108,7 +108,7 @@ class _Layout:
         self.add('I', 4)
         self.raw(frame)
 
-    def compile(self) -> struct.Struct:
+    def to_struct(self) -> struct.Struct:
         return struct.Struct(self.fmt)
 
 
@@ -148,7 +148,7 @@ class _Writer:
         for text in texts:
             self.string(text)
 
-    def bytes(self) -> bytes:
+    def value(self) -> bytes:
         return bytes(self.buf)
 
 
@@ -173,7 +173,7 @@ class TopicEncoder:
         vec = _Layout()
         vec.header(frame)
         vec.add('d', 8, 6)
-        self._vector6 = vec.compile()
+        self._vector6 = vec.to_struct()
         self._frame = frame
         # nav_msgs/Odometry: header, child_frame_id, pose (position, orientation, 36 covariance),
         # twist (linear, angular, 36 covariance); only x, orientation.w and linear.x vary/are set
@@ -183,22 +183,22 @@ class TopicEncoder:
         self._base_frame = _string(base_frame_id)
         odom.raw(self._base_frame)
         odom.add('d', 8, 7 + 36 + 6 + 36)
-        self._odometry = odom.compile()
+        self._odometry = odom.to_struct()
         self._odometry_zeros = (0.0,) * 36
         self._clock = struct.Struct('<iI')
         self._types = dict(TOPIC_TYPES)
 
     def type_of(self, topic: str) -> str:
-        """ROS type name of a pulsejet topic (interface.TOPIC_TYPES)."""
+        """Return the ROS type name of a pulsejet topic (interface.TOPIC_TYPES)."""
         return self._types[topic]
 
     # -- messages -------------------------------------------------------------------------------
     def float64(self, value: float) -> bytes:
-        """std_msgs/Float64."""
+        """Return a std_msgs/Float64."""
         return ENCAPSULATION + self._float64.pack(float(value))
 
     def observation(self, obs: Observation, ns: int) -> list[tuple[str, bytes]]:
-        """Every state topic of one observation (messages.observation_messages), stamped ns."""
+        """Return every state topic's bytes for one observation, stamped ns (as sim_node's)."""
         sec, nsec = divmod(ns, 1_000_000_000)
         frame = self._frame
         pack6 = self._vector6.pack
@@ -231,14 +231,14 @@ class TopicEncoder:
         ]
 
     def commands(self, cmd: Command) -> list[tuple[str, bytes]]:
-        """The per-actuator Float64 commands (messages.command_messages)."""
+        """Return the Float64 message of each actuator (as messages.command_messages does)."""
         return [
             (topic, ENCAPSULATION + self._float64.pack(float(getattr(cmd, COMMAND_FIELDS[topic]))))
             for topic in COMMAND_TOPICS
         ]
 
     def joint_state(self, names: Sequence[str], positions: Iterable[float], ns: int) -> bytes:
-        """sensor_msgs/JointState with velocity and effort filled with zeros, as sim_node's."""
+        """Return a sensor_msgs/JointState, velocity and effort filled with zeros (as sim_node)."""
         values = np.array([float(v) for v in positions], dtype='<f8')
         w = _Writer()
         w.header(ns, self.frame_id)
@@ -247,10 +247,10 @@ class TopicEncoder:
         zeros = np.zeros(len(values))
         w.float64_sequence(zeros)
         w.float64_sequence(zeros)
-        return w.bytes()
+        return w.value()
 
     def applied_command(self, cmd: Command, ns: int) -> bytes:
-        """The command held from ns on (messages.applied_command_message)."""
+        """Return the command held from ns on (as messages.applied_command_message)."""
         return self.joint_state(
             APPLIED_COMMAND_NAMES, (getattr(cmd, n) for n in APPLIED_COMMAND_NAMES), ns
         )
@@ -278,7 +278,7 @@ class TopicEncoder:
         return ENCAPSULATION + head + struct.pack('<I', len(r)) + points.tobytes()
 
     def ledger(self, ledger: Mapping[str, float], ns: int) -> bytes:
-        """Energy ledger as diagnostic_msgs/DiagnosticArray (messages.ledger_message)."""
+        """Return the energy ledger as a diagnostic_msgs/DiagnosticArray (ledger_message)."""
         level, message = ledger_status(ledger)
         w = _Writer()
         w.header(ns, self.frame_id)
@@ -291,7 +291,7 @@ class TopicEncoder:
         for key, value in ledger.items():
             w.string(str(key))
             w.string(repr(float(value)))
-        return w.bytes()
+        return w.value()
 
 
 def ledger_status(ledger: Mapping[str, float]) -> tuple[int, str]:

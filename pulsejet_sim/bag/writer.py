@@ -34,7 +34,7 @@ import struct
 import threading
 import time
 from types import FrameType
-from typing import Any, Callable, Iterable, Iterator, Sequence
+from typing import Any, Callable, Iterable, Sequence
 import weakref
 
 from mcap.records import MessageIndex
@@ -591,7 +591,8 @@ class _FastChunk:
         """
         Append (topic, data) messages stamped log_time_ns (log = publish time).
 
-        route maps a topic to (channel id, qualified name) (route_of adds a missing one); counts[name] is the channel's message count, the next message's sequence.
+        route maps a topic to (channel id, qualified name) (route_of adds a missing one);
+        counts[name] is the channel's message count, the next message's sequence.
         """
         builder, stats, chunk_size = self.builder, self.stats, self.chunk_size
         # the statistics and chunk times add_message would leave after each message in turn
