@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import io
+import os
 from pathlib import Path
 import pstats
 import statistics
@@ -57,6 +58,23 @@ def record(name: str, duration_s: float, out: Path) -> float:
     start = time.perf_counter()
     run_scene(scene, duration_s, out)
     return time.perf_counter() - start
+
+
+def record_without_appending(name: str, duration_s: float, out: Path) -> float:
+    """
+    Time run_scene with BagWriter.write_records a no-op: everything but appending the messages.
+
+    The model's profile() and energy_ledger(), the CDR packing, opening and closing the file: what
+    bounds the ratio however fast the MCAP writing gets.
+    """
+    from pulsejet_sim.bag.writer import BagWriter
+
+    original = BagWriter.write_records
+    BagWriter.write_records = lambda self, records, log_time_ns: None
+    try:
+        return record(name, duration_s, out)
+    finally:
+        BagWriter.write_records = original
 
 
 def record_with_rclpy(name: str, duration_s: float, out: Path) -> float:
@@ -139,6 +157,7 @@ def main(argv=None) -> int:
         except ImportError:
             with_rclpy = False
     assert threading.current_thread() is threading.main_thread()
+    load_before = os.getloadavg()
     rows, profiles = [], []
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'run.mcap'
@@ -147,11 +166,12 @@ def main(argv=None) -> int:
             if with_rclpy:
                 record_with_rclpy(name, 0.2, out)
             times: dict[str, list[float]] = {'physics': [], 'record': [], 'rclpy': [],
-                                             'summary': []}
+                                             'summary': [], 'no_append': []}
             for _ in range(args.repeats):  # interleaved: the machine's load hits all alike
                 times['physics'].append(physics(name, args.duration))
                 times['record'].append(record(name, args.duration, out))
                 times['summary'].append(summary(out))
+                times['no_append'].append(record_without_appending(name, args.duration, out))
                 if with_rclpy:
                     times['rclpy'].append(record_with_rclpy(name, args.duration, out))
             med = {k: statistics.median(v) for k, v in times.items() if v}
@@ -163,16 +183,28 @@ def main(argv=None) -> int:
         'python benchmarks/bench_recording.py ' + ' '.join(argv if argv is not None
                                                            else sys.argv[1:]),
     )
+    load_after = os.getloadavg()
+    text += (
+        f'Load average (1, 5, 15 min) before: {load_before[0]:.2f}, {load_before[1]:.2f}, '
+        f'{load_before[2]:.2f}; after: {load_after[0]:.2f}, {load_after[1]:.2f}, '
+        f'{load_after[2]:.2f} (on {os.cpu_count()} cores: above it, the repeats compete with '
+        'other jobs and single medians move; the interleaving keeps the ratios side by side).'
+        '\n\n'
+    )
     text += (
         f'{args.duration:g} s simulated per run, median of {args.repeats} interleaved repeats '
         '(wall s, real-time factor in brackets). physics: runner.Drive (observation per '
         'publication, no recording); record: runner.run_scene to MCAP (bag.cdr bytes, '
         'zstd chunks); rclpy record: the same topics built as rclpy messages and serialised by '
-        'rclpy (the runner before bag.cdr); summary: analysis.summarize reading the file back '
+        'rclpy (the runner before bag.cdr); without appending: run_scene with write_records a '
+        "no-op (the model's profile and ledger, CDR packing, file open and close: the bound on "
+        'the ratio however fast the MCAP appends get); summary: analysis.summarize reading the '
+        'file back '
         '(printed by `pulsejet run` after the timed run, not in the ratio). Ratio = physics / '
         f'record (target >= {TARGET_RATIO}).\n\n'
-        '| scene | physics | record | ratio | rclpy record | ratio | summary | MCAP size |\n'
-        '|---|---|---|---|---|---|---|---|\n'
+        '| scene | physics | record | ratio | rclpy record | ratio | without appending | ratio '
+        '| summary | MCAP size |\n'
+        '|---|---|---|---|---|---|---|---|---|---|\n'
     )
 
     def cell(seconds):
@@ -185,7 +217,8 @@ def main(argv=None) -> int:
         )
         text += (
             f'| {name} | {cell(med["physics"])} | {cell(med["record"])} | '
-            f'{med["physics"] / med["record"]:.2f} | {rclpy_cells} | {med["summary"]:.3f} s | '
+            f'{med["physics"] / med["record"]:.2f} | {rclpy_cells} | {cell(med["no_append"])} | '
+            f'{med["physics"] / med["no_append"]:.2f} | {med["summary"]:.3f} s | '
             f'{size / 1e6:.2f} MB |\n'
         )
     if profiles:

@@ -19,6 +19,10 @@ Format: the MCAP header's library field carries `pulsejet-format=<FORMAT_VERSION
 refuses a recording of a newer format with a clear message (bag.reader.FORMAT_VERSION).
 
 Topic names are stored fully qualified like rosbag2 ('pulsejet/velocity' -> '/pulsejet/velocity').
+
+Two ways in: write()/write_message() per message (the ROS recorder, with rclpy's bytes), and
+write_records() for batches of bag.cdr bytes (the offline tools, no rclpy), which writes the same
+file faster.
 """
 
 from __future__ import annotations
