@@ -44,6 +44,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, find_topic, iter_bag, stamp_to_s
+from pulsejet_sim.interface import APPLIED_COMMAND_NAMES
 from pulsejet_sim.interface import TOPIC_APPLIED_COMMAND as APPLIED_COMMAND
 from pulsejet_sim.interface import TOPIC_MANTLE_RADIUS as MANTLE_RADIUS
 from pulsejet_sim.interface import TOPIC_VELOCITY as VELOCITY
@@ -57,11 +58,7 @@ OBSERVATION_FIELD = {
     VOLUME: 'volume_m3',
     MANTLE_RADIUS: 'mantle_radius_m',
 }
-APPLIED_NAMES = (
-    'pump_flow_m3_s',
-    'valve_opening',
-    'cable_force_n',
-)  # = messages.APPLIED_COMMAND_NAMES
+APPLIED_NAMES = APPLIED_COMMAND_NAMES  # the names sim_node and the runner write, in order
 METADATA_NAME = 'pulsejet'  # MCAP metadata record that may name the scene of a recording
 
 
@@ -432,9 +429,10 @@ def resimulate(
 
     writer = None
     if out is not None:
+        from pulsejet_sim.bag.cdr import stamp_ns, TopicEncoder
         from pulsejet_sim.bag.writer import BagWriter
-        from pulsejet_sim.ros import messages
 
+        encoder = TopicEncoder()  # the bytes sim_node's messages serialise to, without rclpy
         writer = BagWriter(out)
         result.out_path = Path(out)
     sim = Simulation(scene_obj.model)
@@ -458,17 +456,15 @@ def resimulate(
                 if err > tc.max_abs_error:
                     tc.max_abs_error, tc.worst_time_s = err, t
             if writer is not None and step in targets:
-                ns = messages.stamp_ns(sim.time_s)
-                for topic, msg in messages.observation_messages(obs):
-                    writer.write_message(topic, msg, ns)
+                ns = stamp_ns(sim.time_s)
+                writer.write_records(encoder.observation(obs, ns), ns)
             if step in cmd_at:  # held from this step on: after the state observed at it
                 command = cmd_at[step]
                 sim.command = command
                 if writer is not None:
-                    writer.write_message(
-                        messages.TOPIC_APPLIED_COMMAND,
-                        messages.applied_command_message(command, step * dt),
-                        messages.stamp_ns(step * dt),
+                    ns = stamp_ns(step * dt)
+                    writer.write_records(
+                        [(APPLIED_COMMAND, encoder.applied_command(command, ns))], ns
                     )
     finally:
         if writer is not None:

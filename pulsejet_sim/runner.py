@@ -95,8 +95,10 @@ def run_scene(
 
 
 def _record(drive: Drive, out: Path) -> RunResult:
+    from pulsejet_sim.bag.cdr import stamp_ns, TopicEncoder
     from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
-    from pulsejet_sim.ros import messages
+    from pulsejet_sim.interface import TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER
+    from pulsejet_sim.interface import TOPIC_MANTLE_PROFILE
     import yaml
 
     sim, scene = drive.sim, drive.scene
@@ -116,38 +118,31 @@ def _record(drive: Drive, out: Path) -> RunResult:
         if threading.current_thread() is threading.main_thread()
         else None
     )
+    # CDR straight from the values (bag.cdr): the bytes sim_node's rclpy messages serialise to
+    encoder = TopicEncoder()
+    write = writer.write_records
 
     def write_state(obs: Observation, ledger: bool) -> None:
-        ns = messages.stamp_ns(obs.time_s)
-        for topic, msg in messages.observation_messages(obs):
-            writer.write_message(topic, msg, ns)
+        ns = stamp_ns(obs.time_s)
+        records = encoder.observation(obs, ns)
         profile = sim.profile()
         if profile is not None:
-            writer.write_message(
-                messages.TOPIC_MANTLE_PROFILE, messages.profile_message(*profile, obs.time_s), ns
-            )
+            records.append((TOPIC_MANTLE_PROFILE, encoder.profile(*profile, ns)))
         if ledger:
-            writer.write_message(
-                messages.TOPIC_ENERGY_LEDGER,
-                messages.ledger_message(sim.energy_ledger(), obs.time_s),
-                ns,
-            )
+            records.append((TOPIC_ENERGY_LEDGER, encoder.ledger(sim.energy_ledger(), ns)))
+        write(records, ns)
 
     published = 0
     last_applied = None
     try:
         write_state(sim.observe(), ledger=True)
         for start_s, command, obs in drive:
-            ns = messages.stamp_ns(start_s)
-            for topic, msg in messages.command_messages(command):
-                writer.write_message(topic, msg, ns)
+            ns = stamp_ns(start_s)
+            records = encoder.commands(command)
             if command != last_applied:
-                writer.write_message(
-                    messages.TOPIC_APPLIED_COMMAND,
-                    messages.applied_command_message(command, start_s),
-                    ns,
-                )
+                records.append((TOPIC_APPLIED_COMMAND, encoder.applied_command(command, ns)))
                 last_applied = command
+            write(records, ns)
             published += 1
             write_state(obs, ledger=published % ledger_every == 0 or published == drive.batches)
         if drive.fault is not None:

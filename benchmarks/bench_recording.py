@@ -1,0 +1,231 @@
+"""
+Benchmark (not a test): what recording costs an offline run.
+
+For the default shell scene (shell_robot) and the lumped default (pump_cycle), timed side by side
+in one process, repeats interleaved:
+
+- physics: runner.Drive over the scene (Simulation.step per publication period, the observation
+  after each; no recording);
+- record: runner.run_scene with an MCAP output (what `pulsejet run` times: physics, CDR packed
+  from the values by bag.cdr, MCAP writing and closing);
+- rclpy record (only when rclpy imports): the same topics written the way the runner did before,
+  an rclpy message per sample (ros/messages.py) serialised by rclpy, for comparison;
+- summary: analysis.summarize of the recording (the read-back `pulsejet run` prints after the run;
+  not part of the ratio).
+
+Prints a markdown table and writes benchmarks/results/recording.md (date, machine, command,
+medians, the ratio physics/record of the medians). With --profile it adds the cProfile of one
+recorded run per scene (the functions with the most own time).
+
+    .venv/bin/python benchmarks/bench_recording.py [--repeats 7] [--duration 10] [--profile]
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import os
+from pathlib import Path
+import pstats
+import statistics
+import sys
+import tempfile
+import threading
+import time
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import bench_common  # noqa: E402
+from pulsejet_sim import analysis  # noqa: E402
+from pulsejet_sim.runner import Drive, LEDGER_PERIOD_S, run_scene  # noqa: E402
+from pulsejet_sim.scene import load_scene  # noqa: E402
+
+SCENES = ('shell_robot', 'pump_cycle')
+TARGET_RATIO = 0.7  # issue: `pulsejet run` at >= 0.7x the speed of the physics with observations
+
+
+def physics(name: str, duration_s: float) -> float:
+    drive = Drive(load_scene(name), duration_s)
+    start = time.perf_counter()
+    for _ in drive:
+        pass
+    return time.perf_counter() - start
+
+
+def record(name: str, duration_s: float, out: Path) -> float:
+    scene = load_scene(name)
+    start = time.perf_counter()
+    run_scene(scene, duration_s, out)
+    return time.perf_counter() - start
+
+
+def record_without_appending(name: str, duration_s: float, out: Path) -> float:
+    """
+    Time run_scene with BagWriter.write_records a no-op: everything but appending the messages.
+
+    The model's profile() and energy_ledger(), the CDR packing, opening and closing the file: what
+    bounds the ratio however fast the MCAP writing gets.
+    """
+    from pulsejet_sim.bag.writer import BagWriter
+
+    original = BagWriter.write_records
+    BagWriter.write_records = lambda self, records, log_time_ns: None
+    try:
+        return record(name, duration_s, out)
+    finally:
+        BagWriter.write_records = original
+
+
+def record_with_rclpy(name: str, duration_s: float, out: Path) -> float:
+    """Record as the runner did before bag.cdr: an rclpy message per sample, rclpy-serialised."""
+    from pulsejet_sim.bag.writer import BagWriter
+    from pulsejet_sim.ros import messages
+
+    scene = load_scene(name)
+    start = time.perf_counter()
+    drive = Drive(scene, duration_s)
+    sim = drive.sim
+    ledger_every = max(1, int(round(LEDGER_PERIOD_S / (drive.batch * scene.model.dt_s))))
+    writer = BagWriter(out)
+
+    def write_state(obs, ledger):
+        ns = messages.stamp_ns(obs.time_s)
+        for topic, msg in messages.observation_messages(obs):
+            writer.write_message(topic, msg, ns)
+        profile = sim.profile()
+        if profile is not None:
+            writer.write_message(
+                messages.TOPIC_MANTLE_PROFILE, messages.profile_message(*profile, obs.time_s), ns
+            )
+        if ledger:
+            writer.write_message(
+                messages.TOPIC_ENERGY_LEDGER,
+                messages.ledger_message(sim.energy_ledger(), obs.time_s),
+                ns,
+            )
+
+    published, last = 0, None
+    write_state(sim.observe(), True)
+    for start_s, command, obs in drive:
+        ns = messages.stamp_ns(start_s)
+        for topic, msg in messages.command_messages(command):
+            writer.write_message(topic, msg, ns)
+        if command != last:
+            writer.write_message(
+                messages.TOPIC_APPLIED_COMMAND,
+                messages.applied_command_message(command, start_s),
+                ns,
+            )
+            last = command
+        published += 1
+        write_state(obs, published % ledger_every == 0 or published == drive.batches)
+    writer.close()
+    return time.perf_counter() - start
+
+
+def summary(out: Path) -> float:
+    start = time.perf_counter()
+    analysis.summarize(out)
+    return time.perf_counter() - start
+
+
+def profile_text(name: str, duration_s: float, out: Path, lines: int = 14) -> str:
+    prof = cProfile.Profile()
+    prof.enable()
+    run_scene(load_scene(name), duration_s, out)
+    prof.disable()
+    stream = io.StringIO()
+    pstats.Stats(prof, stream=stream).sort_stats('tottime').print_stats(lines)
+    body = stream.getvalue()
+    body = body[body.index('ncalls'):] if 'ncalls' in body else body
+    return f'cProfile of one recorded run of {name} ({duration_s:g} s simulated):\n\n```\n' + \
+        body.rstrip() + '\n```\n'
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--repeats', type=int, default=7)
+    parser.add_argument('--duration', type=float, default=10.0, help='simulated s per run')
+    parser.add_argument('--profile', action='store_true')
+    parser.add_argument('--no-rclpy', action='store_true', help='skip the rclpy comparison')
+    args = parser.parse_args(argv)
+    with_rclpy = not args.no_rclpy
+    if with_rclpy:
+        try:
+            import rclpy.serialization  # noqa: F401
+        except ImportError:
+            with_rclpy = False
+    assert threading.current_thread() is threading.main_thread()
+    load_before = os.getloadavg()
+    rows, profiles = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / 'run.mcap'
+        for name in SCENES:
+            record(name, 0.2, out)  # compile / load the numba cache, import everything
+            if with_rclpy:
+                record_with_rclpy(name, 0.2, out)
+            times: dict[str, list[float]] = {'physics': [], 'record': [], 'rclpy': [],
+                                             'summary': [], 'no_append': []}
+            for _ in range(args.repeats):  # interleaved: the machine's load hits all alike
+                times['physics'].append(physics(name, args.duration))
+                times['record'].append(record(name, args.duration, out))
+                times['summary'].append(summary(out))
+                times['no_append'].append(record_without_appending(name, args.duration, out))
+                if with_rclpy:
+                    times['rclpy'].append(record_with_rclpy(name, args.duration, out))
+            med = {k: statistics.median(v) for k, v in times.items() if v}
+            rows.append((name, med, out.stat().st_size))
+            if args.profile:
+                profiles.append(profile_text(name, args.duration, out))
+    text = bench_common.header(
+        'Offline recording: `pulsejet run` against the same physics without recording',
+        'python benchmarks/bench_recording.py ' + ' '.join(argv if argv is not None
+                                                           else sys.argv[1:]),
+    )
+    load_after = os.getloadavg()
+    text += (
+        f'Load average (1, 5, 15 min) before: {load_before[0]:.2f}, {load_before[1]:.2f}, '
+        f'{load_before[2]:.2f}; after: {load_after[0]:.2f}, {load_after[1]:.2f}, '
+        f'{load_after[2]:.2f} (on {os.cpu_count()} cores: above it, the repeats compete with '
+        'other jobs and single medians move; the interleaving keeps the ratios side by side).'
+        '\n\n'
+    )
+    text += (
+        f'{args.duration:g} s simulated per run, median of {args.repeats} interleaved repeats '
+        '(wall s, real-time factor in brackets). physics: runner.Drive (observation per '
+        'publication, no recording); record: runner.run_scene to MCAP (bag.cdr bytes, '
+        'zstd chunks); rclpy record: the same topics built as rclpy messages and serialised by '
+        'rclpy (the runner before bag.cdr); without appending: run_scene with write_records a '
+        "no-op (the model's profile and ledger, CDR packing, file open and close: the bound on "
+        'the ratio however fast the MCAP appends get); summary: analysis.summarize reading the '
+        'file back '
+        '(printed by `pulsejet run` after the timed run, not in the ratio). Ratio = physics / '
+        f'record (target >= {TARGET_RATIO}).\n\n'
+        '| scene | physics | record | ratio | rclpy record | ratio | without appending | ratio '
+        '| summary | MCAP size |\n'
+        '|---|---|---|---|---|---|---|---|---|---|\n'
+    )
+
+    def cell(seconds):
+        return f'{seconds:.3f} s ({args.duration / seconds:.0f}x)'
+
+    for name, med, size in rows:
+        rclpy_cells = (
+            f'{cell(med["rclpy"])} | {med["physics"] / med["rclpy"]:.2f}'
+            if 'rclpy' in med else 'n/a | n/a'
+        )
+        text += (
+            f'| {name} | {cell(med["physics"])} | {cell(med["record"])} | '
+            f'{med["physics"] / med["record"]:.2f} | {rclpy_cells} | {cell(med["no_append"])} | '
+            f'{med["physics"] / med["no_append"]:.2f} | {med["summary"]:.3f} s | '
+            f'{size / 1e6:.2f} MB |\n'
+        )
+    if profiles:
+        text += '\n' + '\n'.join(profiles)
+    bench_common.write('recording', text)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
