@@ -50,6 +50,7 @@ from pulsejet_sim.engine import session as eng
 from pulsejet_sim.interface import BASE_FRAME_ID, ODOM_FRAME_ID
 from pulsejet_sim.ros.executor import EXECUTOR_KINDS
 from pulsejet_sim.ros.node_params import (
+    declare as declare_spec,
     ParamSpec,
     scene_override_descriptor,
     scene_override_names,
@@ -217,9 +218,7 @@ LIVE_CONFIG = (
 
 def declare(node) -> dict[str, Any]:
     """Declare every parameter on `node` and return the checked values (ValueError: a bad one)."""
-    for spec in PARAMETERS:
-        node.declare_parameter(spec.name, spec.default, spec.descriptor())
-    return {spec.name: spec.check(node.get_parameter(spec.name).value) for spec in PARAMETERS}
+    return {spec.name: declare_spec(node, spec) for spec in PARAMETERS}
 
 
 def load_scene_from_parameters(node, values: dict[str, Any]):
