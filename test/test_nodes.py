@@ -11,6 +11,7 @@ import os
 from pathlib import Path
 import signal
 import subprocess
+import sys
 import time
 
 from conftest import isolate_ros
@@ -292,6 +293,44 @@ def test_exits_after_duration(start_node):
     out = sim.output()
     assert sim.proc.returncode == 0, out[-3000:]
     assert 'duration 0.5 s of simulated time reached' in out, out[-3000:]
+
+
+GC_PROBE = """
+import gc
+import sys
+
+from pulsejet_sim.ros.node_main import run_node
+from rclpy.node import Node
+
+
+class Probe(Node):
+    def __init__(self):
+        super().__init__('gc_probe')
+        self.done = False
+
+    def start(self):
+        print('objects frozen before start:', gc.get_freeze_count(), flush=True)
+        self.done = True
+
+
+sys.exit(run_node('gc_probe', Probe))
+"""
+
+
+@pytest.mark.timeout(120)
+def test_start_up_objects_are_frozen_before_the_node_starts(ros_domain):
+    """
+    run_node's full collection comes before start(), so no pacing thread waits behind it.
+
+    It holds the interpreter 0.1-0.2 s: run after start(), sim_node's first tick came that late
+    and every start logged 'fell behind real time ... no step computed yet'.
+    """
+    proc = subprocess.run(
+        [sys.executable, '-c', GC_PROBE], capture_output=True, text=True, timeout=100
+    )
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    frozen = [line for line in proc.stdout.splitlines() if 'frozen before start' in line]
+    assert frozen and int(frozen[0].split(':')[1]) > 10_000, proc.stdout[-2000:]
 
 
 @pytest.mark.timeout(120)
