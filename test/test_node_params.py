@@ -352,6 +352,7 @@ def test_replay_and_recorder_describe_their_parameters(domain, client, tmp_path)
         code_replay, out_replay = stop(player)
         code_rec, out_rec = stop(rec)
     assert code_replay == 0 and 'replay: stopped' in out_replay, out_replay[-2000:]
+    assert '(stopped before playing)' in out_replay, out_replay[-2000:]  # not '(0 passes)'
     assert code_rec == 0 and 'recorder: wrote' in out_rec, out_rec[-2000:]
 
 

@@ -111,6 +111,7 @@ class Probe:
             'pulsejet/velocity': TwistStamped,
             'pulsejet/thrust': WrenchStamped,
             'pulsejet/energy_ledger': DiagnosticArray,
+            '/diagnostics': DiagnosticArray,
         }
         for topic, msg_type in topics.items():
             self.received[topic] = []
@@ -215,6 +216,8 @@ def test_publishes_every_topic_stamped_with_sim_time(start_node, probe):
         assert probe.last(topic).header.frame_id == 'pulsejet/body'
     ledger = probe.last('pulsejet/energy_ledger')
     assert stamp_s(ledger.header.stamp) < 1e6
+    # health and books are not places: no frame (as diagnostic_updater publishes them)
+    assert ledger.header.frame_id == '' and probe.last('/diagnostics').header.frame_id == ''
     keys = {kv.key for kv in ledger.status[0].values}
     assert {'in_actuation_work', 'out_jet_kinetic', 'closure_error'} <= keys, keys
     n_ledger = len(probe.received['pulsejet/energy_ledger'])

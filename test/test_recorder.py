@@ -200,6 +200,49 @@ def test_recorder_process_records_all_topics_until_sigint(
 
 
 @pytest.mark.timeout(60)
+def test_recorder_records_diagnostics_and_the_marker_by_default(
+    tmp_path: Path, localhost_only: None
+) -> None:
+    """The node's default topics include /diagnostics and pulsejet/mantle_marker."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from visualization_msgs.msg import Marker
+
+    domain = domain_id(4)
+    proc, out = start_recorder(tmp_path, domain)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    node = Node('test_view_publisher', context=context)
+    qos = messages.reliable_qos('x', 10)
+    pubs = {
+        '/diagnostics': node.create_publisher(DiagnosticArray, '/diagnostics', qos),
+        '/pulsejet/mantle_marker': node.create_publisher(Marker, 'pulsejet/mantle_marker', qos),
+    }
+    try:
+        deadline = time.monotonic() + 30
+        while any(p.get_subscription_count() == 0 for p in pubs.values()):
+            assert time.monotonic() < deadline, 'the recorder did not subscribe both'
+            time.sleep(0.05)
+        pubs['/diagnostics'].publish(
+            messages.health_message('OK', 'pulsejet: /sim_node', '/sim_node', 'ok', {}, 0.5)
+        )
+        pubs['/pulsejet/mantle_marker'].publish(
+            messages.mantle_marker([0.0, 0.02, 0.0], [0.05, 0.0, -0.05], 0.5, 'base_link')
+        )
+        for pub in pubs.values():
+            wait_acked(pub)
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=15)
+    assert proc.returncode == 0, stderr
+    found = read_all(out)
+    assert found['/diagnostics'][0].status[0].name == 'pulsejet: /sim_node'
+    marker = found['/pulsejet/mantle_marker'][0]
+    assert marker.type == Marker.TRIANGLE_LIST and len(marker.points) == 2 * 6 * 24
+
+
+@pytest.mark.timeout(60)
 def test_recorder_topic_subset_and_sigterm(tmp_path: Path, localhost_only: None) -> None:
     domain = domain_id(1)
     topics = ['pulsejet/velocity', 'pulsejet/volume']

@@ -22,6 +22,9 @@ from visualization_msgs.msg import Marker
 #: the state; every ledger publication carries one too
 PROFILE_RATE_MAX_HZ = 100.0
 QOS_DEPTH = 10
+#: the header frame of what is not a place or a direction (diagnostics, the energy ledger), empty
+#: as diagnostic_updater leaves it: a frame would name something no TF tree holds
+NO_FRAME = ''
 
 Call = Callable[[], object]
 
@@ -94,7 +97,8 @@ class StatePublisher:
         values = self.sim.energy_ledger()
         if not all(math.isfinite(v) for v in values.values()):
             return []
-        return [self._call(messages.TOPIC_ENERGY_LEDGER, messages.ledger_message(values, time_s))]
+        msg = messages.ledger_message(values, time_s, NO_FRAME)
+        return [self._call(messages.TOPIC_ENERGY_LEDGER, msg)]
 
     def applied(self, command, time_s: float) -> Call:
         """Return the publish call of the command held from `time_s` on."""
@@ -104,5 +108,7 @@ class StatePublisher:
 
     def diagnostics(self, level: str, name: str, hardware_id: str, message: str, values) -> None:
         """Publish sim_node's health (level OK | WARN | ERROR) now, at the simulation time."""
-        msg = messages.health_message(level, name, hardware_id, message, values, self.sim.time_s)
+        msg = messages.health_message(
+            level, name, hardware_id, message, values, self.sim.time_s, NO_FRAME
+        )
         self._pubs[messages.TOPIC_DIAGNOSTICS].publish(msg)
