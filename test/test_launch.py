@@ -38,6 +38,18 @@ def launched_nodes():
     return nodes
 
 
+def calls_of(name: str):
+    """Every call of `name` in the launch file."""
+    for call in ast.walk(ast.parse(LAUNCH.read_text())):
+        if isinstance(call, ast.Call) and getattr(call.func, 'id', None) == name:
+            yield call
+
+
+def first_argument(call) -> str:
+    assert call.args and isinstance(call.args[0], ast.Constant), ast.dump(call)
+    return call.args[0].value
+
+
 def console_scripts():
     tree = ast.parse((ROOT / 'setup.py').read_text())
     for node in ast.walk(tree):
@@ -68,6 +80,26 @@ def test_launch_starts_installed_executables_with_declared_parameters():
     assert all(key.startswith('/**/') for key in params), sorted(params)
     for name, value in params['/**/sim_node']['ros__parameters'].items():
         sim_node_params.PARAMETER_SPECS[name].check(value)  # in range, the right type
+    # the arguments a user drives, each one used, and nothing used that is not declared
+    declared_args = {first_argument(c) for c in calls_of('DeclareLaunchArgument')}
+    assert declared_args == {
+        'namespace', 'params_file', 'scene', 'use_sim_time', 'record', 'output'
+    }, declared_args
+    assert {first_argument(c) for c in calls_of('LaunchConfiguration')} == declared_args
+    record = next(c for c in calls_of('DeclareLaunchArgument') if first_argument(c) == 'record')
+    choices = next(kw.value for kw in record.keywords if kw.arg == 'choices')
+    assert [e.value for e in choices.elts] == ['true', 'false']
+    # every parameter the launch file sets over the params file is one a node declares
+    given = {
+        key.value
+        for d in ast.walk(ast.parse(LAUNCH.read_text()))
+        if isinstance(d, ast.Dict)
+        for key in d.keys
+    }
+    assert given == {'scene', 'wait_for_topics', 'use_sim_time', 'output'}, given
+    assert given <= set().union(*declared.values()) | {'use_sim_time'}
+    text = LAUNCH.read_text()
+    assert "{'wait_for_topics': ['*']}" in text  # a recording holds t = 0 on every topic
     setup = (ROOT / 'setup.py').read_text()
     assert "glob('launch/*.launch.py')" in setup and "glob('config/params/*.yaml')" in setup
     assert "'config', 'params', 'pulsejet.yaml'" in LAUNCH.read_text()

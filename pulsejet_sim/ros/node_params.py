@@ -112,6 +112,8 @@ class ParamSpec:
         elif isinstance(self.default, float):
             return check_number(self.name, value, self.low, self.high, self.allowed_text())
         elif isinstance(self.default, (list, tuple)):
+            if value is None and not self.default:  # declared by type only (`declare`): empty
+                return ()
             ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
         else:
             ok = isinstance(value, str) and (self.choices is None or value in self.choices)
@@ -151,6 +153,11 @@ def declare(node, spec: ParamSpec):
             )
             node.declare_parameter(spec.name, value, descriptor, ignore_override=True)
             return spec.check(node.get_parameter(spec.name).value)
+    if isinstance(spec.default, (list, tuple)) and not spec.default:
+        # rclpy types an empty list as a byte array: declared by its type only, the parameter is
+        # not set (`ros2 param get` says so) until given, and not set means empty
+        node.declare_parameter(spec.name, Parameter.Type.STRING_ARRAY, descriptor)
+        return spec.check(node.get_parameter_or(spec.name).value)
     node.declare_parameter(spec.name, spec.default, descriptor)
     return spec.check(node.get_parameter(spec.name).value)
 

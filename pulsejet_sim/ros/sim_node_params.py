@@ -25,6 +25,8 @@ shows them):
                                              forever)
   wait_for_subscribers  (int, read-only)     hold the clock at 0 until `/clock` has this many
                                              subscribers
+  wait_for_topics       (string[], read-only) hold the clock at 0 until each topic has a
+                                             subscriber; ["*"]: every topic sim_node publishes
   wait_timeout_s        (double, read-only)  see wait_for_subscribers; default 10
   start_paused          (bool, read-only)    start paused (resume with pulsejet/pause false)
   step_count            (int, live)          physics steps per pulsejet/step call; default 100
@@ -134,6 +136,14 @@ PARAMETERS = (
         0,
         100,
         read_only=True,
+    ),
+    ParamSpec(
+        'wait_for_topics',
+        (),
+        'hold the simulation at t=0 until each of these topics has a subscriber; "*" = every '
+        'topic sim_node publishes (a recorder started beside it then holds t=0 on every topic)',
+        read_only=True,
+        allowed='a list of topic names (relative ones resolved in the node namespace) or ["*"]',
     ),
     ParamSpec(
         'wait_timeout_s',

@@ -59,6 +59,10 @@ class StatePublisher:
         self._profile_every = max(1, int(math.ceil(publish_rate_hz / PROFILE_RATE_MAX_HZ - 1e-9)))
         self._states_built = 0
 
+    def topic_names(self) -> list[str]:
+        """Return the resolved names of every topic published here."""
+        return [pub.topic_name for pub in self._pubs.values()]
+
     def _call(self, topic: str, msg) -> Call:
         return functools.partial(self._pubs[topic].publish, msg)
 
