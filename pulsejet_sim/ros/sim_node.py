@@ -79,7 +79,14 @@ class SimNode(Node):
         self.wait_for_subscribers = p['wait_for_subscribers']
         self.wait_timeout_s = p['wait_timeout_s']
         self.status_name = f'pulsejet: {self.get_fully_qualified_name()}'
-        self.out = StatePublisher(self, sim, rate, (p['odom_frame_id'], p['base_frame_id']))
+        prefix = p['frame_prefix']
+        self.out = StatePublisher(
+            self,
+            sim,
+            rate,
+            (prefix + p['odom_frame_id'], prefix + p['base_frame_id']),
+            publish_tf=p['publish_tf'],
+        )
         self.wait_topics = self._topics_to_wait_for(p['wait_for_topics'])
         # best effort matches reliable and best-effort publishers alike
         commands_qos = QoSProfile(

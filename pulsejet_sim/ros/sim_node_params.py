@@ -41,7 +41,12 @@ shows them):
   diagnostics_period_s  (double, read-only)  /diagnostics period in wall seconds; default 1
   odom_frame_id         (string, read-only)  header frame of `odom` (nav_msgs/Odometry); default
                                              odom
-  base_frame_id         (string, read-only)  child frame of `odom`; default base_link
+  base_frame_id         (string, read-only)  the body frame: child of `odom`, frame of velocity,
+                                             thrust, profile and Marker; default base_link
+  frame_prefix          (string, read-only)  prefix of both frames (robot_state_publisher's
+                                             frame_prefix; the namespace does not set it)
+  publish_tf            (bool, read-only)    odom -> body on /tf with every state, when tf2_msgs
+                                             is installed; default true
 """
 
 from __future__ import annotations
@@ -141,7 +146,8 @@ PARAMETERS = (
         'wait_for_topics',
         (),
         'hold the simulation at t=0 until each of these topics has a subscriber; "*" = every '
-        'topic sim_node publishes (a recorder started beside it then holds t=0 on every topic)',
+        'topic sim_node publishes but /tf (a recorder started beside it then holds t=0 on every '
+        'topic)',
         read_only=True,
         allowed='a list of topic names (relative ones resolved in the node namespace) or ["*"]',
     ),
@@ -210,9 +216,25 @@ PARAMETERS = (
     ParamSpec(
         'base_frame_id',
         BASE_FRAME_ID,
-        'body frame of the odometry twist (REP 105)',
+        'the body frame (REP 105): child of the odometry, frame of the velocity, thrust, mantle '
+        'profile and Marker',
         read_only=True,
         allowed='a frame name',
+    ),
+    ParamSpec(
+        'frame_prefix',
+        '',
+        'put in front of odom_frame_id and base_frame_id, as robot_state_publisher does (e.g. '
+        '"robot1/"; the namespace does not set it): two robots on one /tf keep their frames apart',
+        read_only=True,
+        allowed='a string, e.g. robot1/ (empty: none)',
+    ),
+    ParamSpec(
+        'publish_tf',
+        True,
+        'broadcast odom -> body on /tf with every state (when tf2_msgs is installed); false when '
+        'something else publishes that transform',
+        read_only=True,
     ),
 )
 PARAMETER_SPECS = {p.name: p for p in PARAMETERS}
