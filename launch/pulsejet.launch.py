@@ -5,7 +5,7 @@ sim_node + controller_node + recorder with parameters from a params file (ROS in
         [params_file:=/path/params.yaml] [scene:=pump_cycle] [use_sim_time:=true|false]
         [record:=true|false] [output:=runs/run1.mcap]
 
-Arguments:
+The arguments:
   namespace     namespace of the three nodes (default none); the params file applies under it
   params_file   ros2 params file, blocks keyed /**/<node name> (default the installed
                 config/params/pulsejet.yaml)

@@ -21,8 +21,7 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 from builtin_interfaces.msg import Time  # noqa: E402, I100
-from rcl_interfaces.msg import ParameterType  # noqa: E402
-from rcl_interfaces.msg import Parameter, ParameterValue  # noqa: E402
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue  # noqa: E402
 from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -131,7 +130,7 @@ class Client:
             ).values
         )
 
-    def set(self, node: str, name: str, value: ParameterValue):
+    def set_value(self, node: str, name: str, value: ParameterValue):
         return self.call(
             SetParameters,
             f'{node}/set_parameters',
@@ -265,7 +264,7 @@ def test_a_double_parameter_stays_a_double(domain, client, tmp_path):
         assert d.type == ParameterType.PARAMETER_DOUBLE and not d.dynamic_typing, d
         (value,) = client.get('/sim_node', ['real_time_factor'])
         assert (value.type, value.double_value) == (ParameterType.PARAMETER_DOUBLE, 2.0)
-        result = client.set(
+        result = client.set_value(
             '/sim_node',
             'real_time_factor',
             ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=3),
@@ -273,7 +272,7 @@ def test_a_double_parameter_stays_a_double(domain, client, tmp_path):
         assert not result.successful and 'Wrong parameter type' in result.reason, result
         (value,) = client.get('/sim_node', ['real_time_factor'])
         assert (value.type, value.double_value) == (ParameterType.PARAMETER_DOUBLE, 2.0)
-        result = client.set(
+        result = client.set_value(
             '/sim_node',
             'real_time_factor',
             ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=3.0),

@@ -213,7 +213,8 @@ def test_publishes_every_topic_stamped_with_sim_time(start_node, probe):
         assert all(
             round(s, 9) in clock_set for s in stamps[1:-1]
         ), f'{topic} stamps not on the /clock instants: {stamps[:5]} vs {clocks[:5]}'
-        assert probe.last(topic).header.frame_id == 'base_link'  # the body frame, as the odometry's
+        # the body frame, as the odometry's
+        assert probe.last(topic).header.frame_id == 'base_link'
     ledger = probe.last('pulsejet/energy_ledger')
     assert stamp_s(ledger.header.stamp) < 1e6
     # health and books are not places: no frame (as diagnostic_updater publishes them)

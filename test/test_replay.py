@@ -7,8 +7,8 @@ Listened to from this process; plus the schedule and parameter checks without DD
 from __future__ import annotations
 
 import os
-import re
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys

@@ -16,8 +16,9 @@ recorder's receive time. Analysis uses the simulation-time header stamps inside 
 Parameters (read-only, with descriptors: `ros2 param describe /recorder output`): `output` (path;
 default runs/<UTC date-time>.mcap), `topics` (string array; default every pulsejet topic incl.
 commands, the energy ledger and /clock, plus /diagnostics and the mantle Marker; an entry may be
-`name:pkg/msg/Type` for a topic outside the pulsejet set). On SIGINT/SIGTERM the messages already delivered are written (none that DDS
-acknowledged is lost), the file is closed complete and its path printed.
+`name:pkg/msg/Type` for a topic outside the pulsejet set). On SIGINT/SIGTERM the messages already
+delivered are written (none that DDS acknowledged is lost), the file is closed complete and its
+path printed.
 `Recorder(node, path, topics)` does the same inside another process's node.
 """
 

@@ -184,7 +184,7 @@ class SimNode(Node):
         return sorted(set(topics))
 
     def _subscribers_missing(self) -> list[str]:
-        """What the start still waits for (wait_for_subscribers, wait_for_topics); [] = none."""
+        """Return what the start still waits for (wait_for_subscribers, wait_for_topics), or []."""
         missing = []
         if self.wait_for_subscribers > 0:
             have = self.count_subscribers(messages.TOPIC_CLOCK)
