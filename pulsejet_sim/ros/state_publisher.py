@@ -125,13 +125,14 @@ class StatePublisher:
         if ledger:
             calls += self.ledger(obs.time_s)
             marker = self._pubs.get(messages.TOPIC_MANTLE_MARKER)
-            # the 3-D view at the ledger's rate, in the odometry's body frame, and only while
-            # someone looks: its ~14000 points take ~15 ms of the GIL to build and send
+            # the 3-D view at the ledger's rate, in the body frame, and only while someone
+            # looks; serialised from arrays (its ~14000 points as Python objects held the
+            # interpreter ~15 ms), published as those bytes
             if profile is not None and marker.get_subscription_count():
                 calls.append(
                     functools.partial(
                         marker.publish,
-                        messages.mantle_marker(*profile, obs.time_s, self.frames[1]),
+                        messages.mantle_marker_cdr(*profile, obs.time_s, self.frames[1]),
                     )
                 )
         return calls
