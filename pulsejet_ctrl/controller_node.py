@@ -56,7 +56,7 @@ import sys
 from pulsejet_ctrl import routines as _routines
 from pulsejet_sim.models.schema import Choice
 from pulsejet_sim.ros import messages
-from pulsejet_sim.ros.node_params import check_parameters, ParamSpec
+from pulsejet_sim.ros.node_params import check_parameters, declare, ParamSpec
 from pulsejet_sim.scene import DEFAULT_SCENE
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockChange, JumpThreshold
@@ -169,7 +169,8 @@ class ControllerNode(Node):
                 description += f' (> {number.low:g})'
             low, high = number.low, number.high
             default = scene_routine.get(name, number.default)
-            # numbers accept ints and floats (`inflate_s:=2`); the routine checks the values too.
+            # `inflate_s:=2` is declared as the double 2.0 (node_params.declare says so); the
+            # routine checks the values too.
             # Read-only: they define the routine's state machine (restart the node to change them).
             spec = ParamSpec(name, kind_of(default), description, low, high, read_only=True)
             config[name] = kind_of(self._declare(spec))
@@ -242,8 +243,7 @@ class ControllerNode(Node):
 
     def _declare(self, spec: ParamSpec):
         self._specs[spec.name] = spec
-        self.declare_parameter(spec.name, spec.default, spec.descriptor())
-        return spec.check(self.get_parameter(spec.name).value)
+        return declare(self, spec)
 
     def _on_set_parameters(self, params):
         checked, rejection = check_parameters(params, self._specs)

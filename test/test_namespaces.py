@@ -11,6 +11,7 @@ import time
 
 from conftest import isolate_ros
 from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
 from pulsejet_sim.ros.node_params import node_command
 import pytest
@@ -23,10 +24,13 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 def test_two_namespaced_robots_in_one_domain(monkeypatch, tmp_path):
     domain = isolate_ros(monkeypatch, 57)
     procs = []
-    for ns, frame in (('robot1', 'robot1/base_link'), ('robot2', 'robot2/base_link')):
+    # robot1 by frame_prefix (as robot_state_publisher's), robot2 by naming both frames
+    for ns, frames in (
+        ('robot1', {'frame_prefix': 'robot1/'}),
+        ('robot2', {'base_frame_id': 'robot2/base_link', 'odom_frame_id': 'robot2/odom'}),
+    ):
         cmd = node_command(
-            'pulsejet_sim.ros.sim_node',
-            {'scene': 'pump_cycle', 'base_frame_id': frame, 'odom_frame_id': f'{ns}/odom'},
+            'pulsejet_sim.ros.sim_node', {'scene': 'pump_cycle', **frames}
         ) + ['-r', f'__ns:=/{ns}']
         log = open(tmp_path / f'{ns}.log', 'wb')
         procs.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), log))
@@ -39,18 +43,26 @@ def test_two_namespaced_robots_in_one_domain(monkeypatch, tmp_path):
     node = rclpy.create_node('namespace_probe', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    odometry, statuses = {}, set()
+    odometry, velocity, statuses = {}, {}, set()
     qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     for ns in ('robot1', 'robot2'):
         node.create_subscription(
             Odometry, f'/{ns}/odom', lambda m, ns=ns: odometry.setdefault(ns, m), qos
+        )
+        node.create_subscription(
+            TwistStamped,
+            f'/{ns}/pulsejet/velocity',
+            lambda m, ns=ns: velocity.setdefault(ns, m),
+            qos,
         )
     node.create_subscription(
         DiagnosticArray, '/diagnostics', lambda m: statuses.update(s.name for s in m.status), qos
     )
     try:
         end = time.monotonic() + 120
-        while time.monotonic() < end and not (len(odometry) == 2 and len(statuses) >= 2):
+        while time.monotonic() < end and not (
+            len(odometry) == 2 and len(velocity) == 2 and len(statuses) >= 2
+        ):
             executor.spin_once(timeout_sec=0.05)
         names = {name for name, _ in node.get_topic_names_and_types()}
         for ns in ('robot1', 'robot2'):
@@ -70,6 +82,8 @@ def test_two_namespaced_robots_in_one_domain(monkeypatch, tmp_path):
             assert odometry[ns].header.frame_id == f'{ns}/odom'
             assert odometry[ns].child_frame_id == f'{ns}/base_link'
             assert odometry[ns].pose.pose.orientation.w == 1.0
+            # one body frame for everything body-fixed
+            assert velocity[ns].header.frame_id == f'{ns}/base_link'
     finally:
         executor.shutdown()
         node.destroy_node()
@@ -141,6 +155,7 @@ def test_shell_mantle_marker_is_the_revolved_meridian(monkeypatch, tmp_path):
             marker.type == Marker.TRIANGLE_LIST
             and marker.header.frame_id == messages.BASE_FRAME_ID
         )
+        assert profiles[stamp_of(marker)].header.frame_id == marker.header.frame_id
         profile = profiles[stamp_of(marker)].polygon.points  # same state
         assert len(marker.points) == 6 * messages.MANTLE_MARKER_SEGMENTS * (len(profile) - 1)
         meridian = {

@@ -21,8 +21,8 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy')
 from builtin_interfaces.msg import Time  # noqa: E402, I100
-from rcl_interfaces.msg import ParameterType  # noqa: E402
-from rcl_interfaces.srv import DescribeParameters, GetParameters  # noqa: E402
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue  # noqa: E402
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
@@ -130,6 +130,13 @@ class Client:
             ).values
         )
 
+    def set_value(self, node: str, name: str, value: ParameterValue):
+        return self.call(
+            SetParameters,
+            f'{node}/set_parameters',
+            SetParameters.Request(parameters=[Parameter(name=name, value=value)]),
+        ).results[0]
+
     def close(self):
         self.executor.shutdown()
         self.node.destroy_node()
@@ -236,6 +243,60 @@ def test_sim_node_refuses_a_bad_scene_override(domain, override, named):
     ]
 
 
+# ---- doubles stay doubles -----------------------------------------------------------------------
+@pytest.mark.timeout(150)
+def test_a_double_parameter_stays_a_double(domain, client, tmp_path):
+    """
+    real_time_factor is a double: given as 2 at start-up it is declared 2.0, and said so.
+
+    A live set with an integer is refused with rclpy's reason (the value kept), a double is taken.
+    """
+    proc = subprocess.Popen(
+        node_command('pulsejet_sim.ros.sim_node', {'scene': 'pump_cycle'})
+        + ['-p', 'real_time_factor:=2'],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        cwd=ROOT,
+    )
+    try:
+        d = client.describe('/sim_node', ['real_time_factor'])['real_time_factor']
+        assert d.type == ParameterType.PARAMETER_DOUBLE and not d.dynamic_typing, d
+        (value,) = client.get('/sim_node', ['real_time_factor'])
+        assert (value.type, value.double_value) == (ParameterType.PARAMETER_DOUBLE, 2.0)
+        result = client.set_value(
+            '/sim_node',
+            'real_time_factor',
+            ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=3),
+        )
+        assert not result.successful and 'Wrong parameter type' in result.reason, result
+        (value,) = client.get('/sim_node', ['real_time_factor'])
+        assert (value.type, value.double_value) == (ParameterType.PARAMETER_DOUBLE, 2.0)
+        result = client.set_value(
+            '/sim_node',
+            'real_time_factor',
+            ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=3.0),
+        )
+        assert result.successful, result
+        (value,) = client.get('/sim_node', ['real_time_factor'])
+        assert (value.type, value.double_value) == (ParameterType.PARAMETER_DOUBLE, 3.0)
+    finally:
+        code, out = stop(proc)
+    assert code == 0, out[-2000:]
+    assert 'parameter real_time_factor:=2 given as an integer; declared as the double 2.0' in out
+    assert 'real_time_factor set to 3.0' in out, out[-2000:]
+
+
+@pytest.mark.timeout(120)
+def test_a_double_given_as_a_word_is_refused_naming_the_range(domain):
+    proc = run_sim_node('-p', 'scene:=pump_cycle', '-p', 'real_time_factor:=fast')
+    assert proc.returncode == 2, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert (
+        "parameter real_time_factor='fast' rejected; allowed: a number in [0.001, 1000]"
+        in proc.stderr
+    ), proc.stderr[-2000:]
+
+
 # ---- descriptors of replay and recorder ---------------------------------------------------------
 @pytest.mark.timeout(150)
 def test_replay_and_recorder_describe_their_parameters(domain, client, tmp_path):
@@ -290,6 +351,7 @@ def test_replay_and_recorder_describe_their_parameters(domain, client, tmp_path)
         code_replay, out_replay = stop(player)
         code_rec, out_rec = stop(rec)
     assert code_replay == 0 and 'replay: stopped' in out_replay, out_replay[-2000:]
+    assert '(stopped before playing)' in out_replay, out_replay[-2000:]  # not '(0 passes)'
     assert code_rec == 0 and 'recorder: wrote' in out_rec, out_rec[-2000:]
 
 

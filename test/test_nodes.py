@@ -11,6 +11,7 @@ import os
 from pathlib import Path
 import signal
 import subprocess
+import sys
 import time
 
 from conftest import isolate_ros
@@ -110,6 +111,7 @@ class Probe:
             'pulsejet/velocity': TwistStamped,
             'pulsejet/thrust': WrenchStamped,
             'pulsejet/energy_ledger': DiagnosticArray,
+            '/diagnostics': DiagnosticArray,
         }
         for topic, msg_type in topics.items():
             self.received[topic] = []
@@ -211,9 +213,12 @@ def test_publishes_every_topic_stamped_with_sim_time(start_node, probe):
         assert all(
             round(s, 9) in clock_set for s in stamps[1:-1]
         ), f'{topic} stamps not on the /clock instants: {stamps[:5]} vs {clocks[:5]}'
-        assert probe.last(topic).header.frame_id == 'pulsejet/body'
+        # the body frame, as the odometry's
+        assert probe.last(topic).header.frame_id == 'base_link'
     ledger = probe.last('pulsejet/energy_ledger')
     assert stamp_s(ledger.header.stamp) < 1e6
+    # health and books are not places: no frame (as diagnostic_updater publishes them)
+    assert ledger.header.frame_id == '' and probe.last('/diagnostics').header.frame_id == ''
     keys = {kv.key for kv in ledger.status[0].values}
     assert {'in_actuation_work', 'out_jet_kinetic', 'closure_error'} <= keys, keys
     n_ledger = len(probe.received['pulsejet/energy_ledger'])
@@ -292,6 +297,44 @@ def test_exits_after_duration(start_node):
     out = sim.output()
     assert sim.proc.returncode == 0, out[-3000:]
     assert 'duration 0.5 s of simulated time reached' in out, out[-3000:]
+
+
+GC_PROBE = """
+import gc
+import sys
+
+from pulsejet_sim.ros.node_main import run_node
+from rclpy.node import Node
+
+
+class Probe(Node):
+    def __init__(self):
+        super().__init__('gc_probe')
+        self.done = False
+
+    def start(self):
+        print('objects frozen before start:', gc.get_freeze_count(), flush=True)
+        self.done = True
+
+
+sys.exit(run_node('gc_probe', Probe))
+"""
+
+
+@pytest.mark.timeout(120)
+def test_start_up_objects_are_frozen_before_the_node_starts(ros_domain):
+    """
+    run_node's full collection comes before start(), so no pacing thread waits behind it.
+
+    It holds the interpreter 0.1-0.2 s: run after start(), sim_node's first tick came that late
+    and every start logged 'fell behind real time ... no step computed yet'.
+    """
+    proc = subprocess.run(
+        [sys.executable, '-c', GC_PROBE], capture_output=True, text=True, timeout=100
+    )
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    frozen = [line for line in proc.stdout.splitlines() if 'frozen before start' in line]
+    assert frozen and int(frozen[0].split(':')[1]) > 10_000, proc.stdout[-2000:]
 
 
 @pytest.mark.timeout(120)

@@ -200,6 +200,49 @@ def test_recorder_process_records_all_topics_until_sigint(
 
 
 @pytest.mark.timeout(60)
+def test_recorder_records_diagnostics_and_the_marker_by_default(
+    tmp_path: Path, localhost_only: None
+) -> None:
+    """The node's default topics include /diagnostics and pulsejet/mantle_marker."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from visualization_msgs.msg import Marker
+
+    domain = domain_id(4)
+    proc, out = start_recorder(tmp_path, domain)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    node = Node('test_view_publisher', context=context)
+    qos = messages.reliable_qos('x', 10)
+    pubs = {
+        '/diagnostics': node.create_publisher(DiagnosticArray, '/diagnostics', qos),
+        '/pulsejet/mantle_marker': node.create_publisher(Marker, 'pulsejet/mantle_marker', qos),
+    }
+    try:
+        deadline = time.monotonic() + 30
+        while any(p.get_subscription_count() == 0 for p in pubs.values()):
+            assert time.monotonic() < deadline, 'the recorder did not subscribe both'
+            time.sleep(0.05)
+        pubs['/diagnostics'].publish(
+            messages.health_message('OK', 'pulsejet: /sim_node', '/sim_node', 'ok', {}, 0.5)
+        )
+        pubs['/pulsejet/mantle_marker'].publish(
+            messages.mantle_marker([0.0, 0.02, 0.0], [0.05, 0.0, -0.05], 0.5, 'base_link')
+        )
+        for pub in pubs.values():
+            wait_acked(pub)
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=15)
+    assert proc.returncode == 0, stderr
+    found = read_all(out)
+    assert found['/diagnostics'][0].status[0].name == 'pulsejet: /sim_node'
+    marker = found['/pulsejet/mantle_marker'][0]
+    assert marker.type == Marker.TRIANGLE_LIST and len(marker.points) == 2 * 6 * 24
+
+
+@pytest.mark.timeout(60)
 def test_recorder_topic_subset_and_sigterm(tmp_path: Path, localhost_only: None) -> None:
     domain = domain_id(1)
     topics = ['pulsejet/velocity', 'pulsejet/volume']
@@ -331,3 +374,58 @@ def test_subscription_qos_records_every_publisher_as_rosbag2_does() -> None:
     assert (qos.reliability, qos.durability) == (reliable, DurabilityPolicy.TRANSIENT_LOCAL)
     # a volatile publisher beside a latched one: a transient-local subscription would miss it
     assert subscription_qos([latched, offered(reliable)]).durability == DurabilityPolicy.VOLATILE
+
+
+@pytest.mark.timeout(150)
+def test_sim_node_waiting_for_every_topic_gives_a_recording_from_t0(
+    tmp_path: Path, localhost_only: None
+) -> None:
+    """
+    sim_node with wait_for_topics ['*'] (the launch file's record:=true) and a recorder.
+
+    sim_node starts first and holds t = 0 until the recorder subscribed every topic it publishes:
+    every state topic is recorded from t = 0, each with one message per state.
+    """
+    from pulsejet_sim.ros.node_params import node_command
+
+    domain = domain_id(5)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    sim_log = tmp_path / 'sim_node.log'
+    with open(sim_log, 'wb') as log:
+        sim = subprocess.Popen(
+            node_command(
+                'pulsejet_sim.ros.sim_node',
+                {'scene': 'pump_cycle', 'duration_s': 0.3, 'wait_timeout_s': 100.0},
+            )
+            + ['-p', "wait_for_topics:=['*']"],
+            cwd=REPO,
+            env=env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
+    time.sleep(1.0)  # sim_node is up (and waiting) before the recorder is
+    proc, out = start_recorder(tmp_path, domain)
+    try:
+        sim.wait(timeout=120)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=15)
+    assert sim.returncode == 0, sim_log.read_text()[-3000:]
+    assert proc.returncode == 0, stderr
+    found = read_all(out)
+    per_state = [
+        '/pulsejet/velocity',
+        '/pulsejet/thrust',
+        '/pulsejet/volume',
+        '/pulsejet/fluid_mass',
+        '/pulsejet/mantle_radius',
+        '/odom',
+    ]
+    n_states = 31  # t = 0, 0.01, ..., 0.3 s at pump_cycle's 100 Hz
+    for topic in per_state:
+        assert len(found.get(topic, [])) == n_states, (topic, len(found.get(topic, [])))
+    for topic in ('/pulsejet/velocity', '/pulsejet/thrust', '/odom'):
+        first = found[topic][0].header.stamp
+        assert (first.sec, first.nanosec) == (0, 0), (topic, first)
+    assert len(found['/clock']) >= n_states - 2  # best-effort subscription
+    assert found['/pulsejet/applied_command'][0].header.stamp.sec == 0

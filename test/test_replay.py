@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -17,7 +18,13 @@ import time
 from geometry_msgs.msg import TwistStamped
 import numpy as np
 from pulsejet_sim.bag import BagInfo, BagWriter, iter_bag
-from pulsejet_sim.ros.replay import build_schedule, check_config, ConfigError, load_recording
+from pulsejet_sim.ros.replay import (
+    build_schedule,
+    check_config,
+    ConfigError,
+    load_recording,
+    passes_phrase,
+)
 from pulsejet_sim.runner import run_scene
 from pulsejet_sim.scene import load_scene
 import pytest
@@ -212,6 +219,8 @@ def test_replay_generated_clock_topic_filter_offset_loop_and_sigint(
         listener.close()
     assert proc.returncode == 0, stderr
     assert 'stopped' in stdout and 'generated /clock' in stdout, stdout
+    # stopped during the second pass or a later one: the summary says which, not '(0 passes)'
+    assert re.search(r'\(in pass ([2-9]|\d\d+), \d+ complete\)', stdout), stdout
 
     stamps, values = recorded_velocity(recording_without_clock)
     first_pass = [(s, v) for s, v in zip(stamps, values) if s >= 0.5 - 1e-9]
@@ -225,6 +234,14 @@ def test_replay_generated_clock_topic_filter_offset_loop_and_sigint(
     # 100 Hz of wall time at rate 2: a tick every 20 ms of recorded time, plus the final one
     assert 24 <= len(one_pass) <= 28
     assert clock[jump] == pytest.approx(0.5)
+
+
+def test_the_summary_says_how_far_the_replay_got() -> None:
+    assert passes_phrase(1, True, 40) == '1 pass'
+    assert passes_phrase(3, True, 120) == '3 passes'
+    assert passes_phrase(0, False, 0) == 'stopped before playing'
+    assert passes_phrase(0, False, 12) == 'in pass 1'
+    assert passes_phrase(2, False, 90) == 'in pass 3, 2 complete'
 
 
 @pytest.mark.timeout(30)

@@ -128,9 +128,12 @@ def test_parameters_validated_live_pacing_and_diagnostics(domain):
             and '0.001' in bad.reason
             and '1000' in bad.reason
         ), bad.reason
+        # a double stays a double: rclpy refuses another type with its reason, as on any ROS node
         bad = h.set_parameters(real_time_factor='fast')[0]
+        assert not bad.successful and "expected 'Type.DOUBLE'" in bad.reason, bad.reason
+        bad = h.set_parameters(real_time_factor=2)[0]
         assert (
-            not bad.successful and "'fast'" in bad.reason and '[0.001, 1000]' in bad.reason
+            not bad.successful and "expected 'Type.DOUBLE' got 'Type.INTEGER'" in bad.reason
         ), bad.reason
         bad = h.set_parameters(pacing='turbo')[0]
         assert (
@@ -153,7 +156,9 @@ def test_parameters_validated_live_pacing_and_diagnostics(domain):
         assert not bad.successful and 'rate_hz' in bad.reason and '0.0' in bad.reason, bad.reason
         ro = h.set_parameters_of('/controller_node', inflate_s=1.0)[0]
         assert not ro.successful and 'read-only' in ro.reason, ro.reason
-        assert h.set_parameters_of('/controller_node', rate_hz=20)[0].successful
+        bad = h.set_parameters_of('/controller_node', rate_hz=20)[0]
+        assert not bad.successful and 'Type.INTEGER' in bad.reason, bad.reason
+        assert h.set_parameters_of('/controller_node', rate_hz=20.0)[0].successful
 
         # a good change takes effect, without a clock jump
         h.wait_for(lambda s: s.time_s > 0.3, 20.0)
@@ -224,6 +229,10 @@ def test_lockstep_and_command_watchdog(domain):
         assert h.latest.time_s == 0.0, 'time advanced in lockstep without a step request'
         r = h.resume()
         assert not r.success and 'lockstep' in r.message, r.message
+        # a pause is accepted in lockstep: steps still advance, and it holds when the pacing
+        # changes to a free-running one (checked at the end)
+        r = h.pause()
+        assert r.success and r.message.startswith('paused'), r.message
 
         pump = Command(pump_flow_m3_s=1.0e-3, valve_opening=0.0, cable_force_n=0.0)
         h.send(pump_flow_m3_s=pump.pump_flow_m3_s, valve_opening=pump.valve_opening)
@@ -256,6 +265,14 @@ def test_lockstep_and_command_watchdog(domain):
         assert h.applied[-1][1] == Command(2.0e-3, 1.0, 0.0)
         d = h.wait_for_diagnostics(lambda d: d.level == WARN, 3.0, 'a WARN diagnostic')
         assert d.values['watchdog'] == 'tripped (hold)', d
+
+        # the pause taken in lockstep holds under real_time until resumed
+        assert h.set_parameters(pacing='real_time')[0].successful
+        t_held = h.latest.time_s
+        h.spin(0.5)
+        assert h.latest.time_s == t_held
+        assert h.resume().success
+        h.wait_for(lambda x: x.time_s > t_held + 0.05, 10.0)
     assert h.exit_codes['sim_node'] == 0, h.output()[-3000:]
 
 
@@ -337,7 +354,11 @@ def test_harness_reports_a_failed_start(domain, tmp_path):
             'turbo',
             "pacing='turbo' rejected; allowed: one of real_time, as_fast_as_possible, lockstep",
         ),
-        ('watchdog_timeout_s', -1.0, 'watchdog_timeout_s out of range'),
+        (
+            'watchdog_timeout_s',
+            -1.0,
+            'watchdog_timeout_s=-1.0 rejected; allowed: a number in [0, 3600]',
+        ),
         ('scene_overrides', '[1, 2]', 'allowed: empty or a YAML mapping'),
         ('executor', 'multi', "executor='multi' rejected; allowed: one of events, single"),
     ],

@@ -90,9 +90,11 @@ def run_node(
         executor = make_executor(kind=getattr(node, 'executor_kind', executor_kind))
         node.get_logger().info(f"spinning on rclpy's {type(executor).__name__}")
         executor.add_node(node)
+        # before start(): the full collection holds the interpreter ~0.1-0.2 s, which a pacing
+        # thread already running took for a lag at its first tick ('fell behind real time')
+        freeze_start_up_objects()
         if hasattr(node, 'start'):
             node.start()
-        freeze_start_up_objects()
         while running() and not getattr(node, 'done', False):
             executor.spin_once(timeout_sec=0.05)
         code = getattr(node, 'exit_code', 0)

@@ -76,9 +76,10 @@ class ParamSpec:
                 IntegerRange(from_value=int(self.low), to_value=int(self.high), step=0)
             ]
         elif isinstance(self.default, float):
-            # doubles accept integers too (`real_time_factor:=2`): dynamically typed, checked in
-            # the on-set callback (rclpy applies the range itself to double values)
-            d.dynamic_typing = True
+            # statically typed, as rclcpp and rclpy type a declared double: a live set with an
+            # integer is refused by rclpy with its reason (`declare` converts an integer given at
+            # start-up, saying so); the range is applied by rclpy too
+            d.type = ParameterType.PARAMETER_DOUBLE
             d.floating_point_range = [
                 FloatingPointRange(from_value=float(self.low), to_value=float(self.high), step=0.0)
             ]
@@ -111,6 +112,8 @@ class ParamSpec:
         elif isinstance(self.default, float):
             return check_number(self.name, value, self.low, self.high, self.allowed_text())
         elif isinstance(self.default, (list, tuple)):
+            if value is None and not self.default:  # declared by type only (`declare`): empty
+                return ()
             ok = isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
         else:
             ok = isinstance(value, str) and (self.choices is None or value in self.choices)
@@ -119,6 +122,44 @@ class ParamSpec:
                 f'parameter {self.name}={value!r} rejected; allowed: {self.allowed_text()}'
             )
         return value
+
+
+def declare(node, spec: ParamSpec):
+    """
+    Declare `spec` on `node` and return its checked value (ValueError: a bad one, named).
+
+    A value given at start-up (command line or params file) is checked against the spec before
+    rclpy sees it, so a wrong type is refused with the allowed values instead of rclpy's bare type
+    error. A double given as an integer (`-p real_time_factor:=2`, `real_time_factor: 2` in a
+    params file) is declared as that double and logged: the parameter stays a double, as
+    `ros2 param describe` says, and a later `ros2 param set` with an integer is refused by rclpy
+    ("Wrong parameter type, expected 'Type.DOUBLE' got 'Type.INTEGER'"), as on every ROS node.
+    """
+    from rclpy.parameter import Parameter
+
+    descriptor = spec.descriptor()
+    # rclpy keeps the start-up values (command line, params files) only in this attribute
+    override = node._parameter_overrides.get(spec.name)
+    if override is not None and override.type_ != Parameter.Type.NOT_SET:
+        spec.check(override.value)
+        if (
+            descriptor.type == ParameterType.PARAMETER_DOUBLE
+            and override.type_ == Parameter.Type.INTEGER
+        ):
+            value = float(override.value)
+            node.get_logger().info(
+                f'parameter {spec.name}:={override.value} given as an integer; declared as the '
+                f'double {value!r}'
+            )
+            node.declare_parameter(spec.name, value, descriptor, ignore_override=True)
+            return spec.check(node.get_parameter(spec.name).value)
+    if isinstance(spec.default, (list, tuple)) and not spec.default:
+        # rclpy types an empty list as a byte array: declared by its type only, the parameter is
+        # not set (`ros2 param get` says so) until given, and not set means empty
+        node.declare_parameter(spec.name, Parameter.Type.STRING_ARRAY, descriptor)
+        return spec.check(node.get_parameter_or(spec.name).value)
+    node.declare_parameter(spec.name, spec.default, descriptor)
+    return spec.check(node.get_parameter(spec.name).value)
 
 
 def check_number(name, value, low, high, allowed=None) -> float:

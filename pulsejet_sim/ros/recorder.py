@@ -15,9 +15,10 @@ recorder's receive time. Analysis uses the simulation-time header stamps inside 
 
 Parameters (read-only, with descriptors: `ros2 param describe /recorder output`): `output` (path;
 default runs/<UTC date-time>.mcap), `topics` (string array; default every pulsejet topic incl.
-commands, the energy ledger and /clock; an entry may be `name:pkg/msg/Type` for a topic outside the
-pulsejet set). On SIGINT/SIGTERM the messages already delivered are written (none that DDS
-acknowledged is lost), the file is closed complete and its path printed.
+commands, the energy ledger and /clock, plus /diagnostics and the mantle Marker; an entry may be
+`name:pkg/msg/Type` for a topic outside the pulsejet set). On SIGINT/SIGTERM the messages already
+delivered are written (none that DDS acknowledged is lost), the file is closed complete and its
+path printed.
 `Recorder(node, path, topics)` does the same inside another process's node.
 """
 
@@ -49,6 +50,12 @@ DISCOVERY_PERIOD_S = 0.1
 STOP_POLL_S = 0.1  # a signal ends the recording within this time
 DRAIN_IDLE_SPINS = 5  # at shutdown, taking stops after this many spins that wrote nothing
 FLUSH_PERIOD_S = 1.0  # an idle recorder still pushes its last chunk to disk within this time
+#: what the node records by default: every pulsejet topic and /clock, the nodes' health
+#: (/diagnostics) and the mantle's 3-D view (a viewer of the recording shows it as it was live)
+DEFAULT_TOPICS = tuple(messages.TOPIC_TYPES) + (
+    f'{messages.TOPIC_DIAGNOSTICS}:diagnostic_msgs/msg/DiagnosticArray',
+    f'{messages.TOPIC_MANTLE_MARKER}:visualization_msgs/msg/Marker',
+)
 # read-only: the file and its topics are fixed at start-up
 PARAMETERS = (
     ParamSpec(
@@ -60,9 +67,10 @@ PARAMETERS = (
     ),
     ParamSpec(
         'topics',
-        tuple(messages.TOPIC_TYPES),
+        DEFAULT_TOPICS,
         'topics to record: pulsejet topic names, or '
-        '"name:pkg/msg/Type" for any other topic; default every pulsejet topic and /clock',
+        '"name:pkg/msg/Type" for any other topic; default every pulsejet topic, /clock, '
+        '/diagnostics and the mantle Marker',
         read_only=True,
         allowed='a list of topic names or "name:pkg/msg/Type" entries',
     ),
@@ -275,7 +283,7 @@ def main(args: list[str] | None = None) -> int:
         for spec in PARAMETERS
     }
     output = values['output'] or str(default_output())
-    topics = list(values['topics'] or messages.TOPIC_TYPES)
+    topics = list(values['topics'] or DEFAULT_TOPICS)
     try:
         recorder = Recorder(node, output, topics)
     except (ValueError, OSError) as exc:

@@ -693,11 +693,24 @@ def main(args: Sequence[str] | None = None) -> int:
     total = sum(player.counts.values())
     print(
         f'replay: {"finished" if finished else "stopped"}: published {total} messages in '
-        f'{wall:.3f} s '
-        f'({player.passes} pass{"es" if player.passes != 1 else ""})',
+        f'{wall:.3f} s ({passes_phrase(player.passes, finished, total)})',
         flush=True,
     )
     return 0
+
+
+def passes_phrase(complete: int, finished: bool, published: int) -> str:
+    """
+    Say how far the replay got: complete passes, and the pass a stop interrupted.
+
+    '1 pass', '3 passes'; stopped: 'stopped before playing' (nothing published: still waiting or
+    in delay_s), 'in pass 1', 'in pass 3, 2 complete'.
+    """
+    if finished:
+        return f'{complete} pass{"es" if complete != 1 else ""}'
+    if complete == 0 and published == 0:
+        return 'stopped before playing'
+    return f'in pass {complete + 1}' + (f', {complete} complete' if complete else '')
 
 
 if __name__ == '__main__':

@@ -79,7 +79,15 @@ class SimNode(Node):
         self.wait_for_subscribers = p['wait_for_subscribers']
         self.wait_timeout_s = p['wait_timeout_s']
         self.status_name = f'pulsejet: {self.get_fully_qualified_name()}'
-        self.out = StatePublisher(self, sim, rate, (p['odom_frame_id'], p['base_frame_id']))
+        prefix = p['frame_prefix']
+        self.out = StatePublisher(
+            self,
+            sim,
+            rate,
+            (prefix + p['odom_frame_id'], prefix + p['base_frame_id']),
+            publish_tf=p['publish_tf'],
+        )
+        self.wait_topics = self._topics_to_wait_for(p['wait_for_topics'])
         # best effort matches reliable and best-effort publishers alike
         commands_qos = QoSProfile(
             history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT
@@ -146,19 +154,46 @@ class SimNode(Node):
         s = self.session
         if s.started:
             return s.tick(now)
+        missing = self._subscribers_missing()
+        if missing:
+            if now - self.wait_started < self.wait_timeout_s:
+                if not self._waiting_published:
+                    self._waiting_published = True
+                    return [eng.Publish(self.sim.observe())]
+                return []
+            self.get_logger().warning(
+                f'after {self.wait_timeout_s:g} s still waiting for {"; ".join(missing)}; '
+                'starting anyway'
+            )
+        return s.start(now)
+
+    def _topics_to_wait_for(self, entries) -> list[str]:
+        """Resolve wait_for_topics: '*' = every topic published here (ValueError: a bad name)."""
+        topics = []
+        for entry in entries:
+            if entry == '*':
+                topics += self.out.topic_names()
+                continue
+            try:
+                topics.append(self.resolve_topic_name(entry))
+            except Exception as exc:  # rclpy's InvalidTopicNameException and kin
+                raise ValueError(
+                    f'parameter wait_for_topics entry {entry!r} rejected: {exc}; allowed: a '
+                    'topic name or "*"'
+                ) from None
+        return sorted(set(topics))
+
+    def _subscribers_missing(self) -> list[str]:
+        """Return what the start still waits for (wait_for_subscribers, wait_for_topics), or []."""
+        missing = []
         if self.wait_for_subscribers > 0:
             have = self.count_subscribers(messages.TOPIC_CLOCK)
             if have < self.wait_for_subscribers:
-                if now - self.wait_started < self.wait_timeout_s:
-                    if not self._waiting_published:
-                        self._waiting_published = True
-                        return [eng.Publish(self.sim.observe())]
-                    return []
-                self.get_logger().warning(
-                    f'only {have} of {self.wait_for_subscribers} /clock subscribers after '
-                    f'{self.wait_timeout_s:g} s; starting anyway'
-                )
-        return s.start(now)
+                missing.append(f'{self.wait_for_subscribers} /clock subscribers (have {have})')
+        unsubscribed = [t for t in self.wait_topics if self.count_subscribers(t) == 0]
+        if unsubscribed:
+            missing.append('a subscriber of ' + ', '.join(unsubscribed))
+        return missing
 
     # -- events -> messages ---------------------------------------------------------------------
     def _emit(self, events):

@@ -25,6 +25,8 @@ shows them):
                                              forever)
   wait_for_subscribers  (int, read-only)     hold the clock at 0 until `/clock` has this many
                                              subscribers
+  wait_for_topics       (string[], read-only) hold the clock at 0 until each topic has a
+                                             subscriber; ["*"]: every topic sim_node publishes
   wait_timeout_s        (double, read-only)  see wait_for_subscribers; default 10
   start_paused          (bool, read-only)    start paused (resume with pulsejet/pause false)
   step_count            (int, live)          physics steps per pulsejet/step call; default 100
@@ -39,7 +41,12 @@ shows them):
   diagnostics_period_s  (double, read-only)  /diagnostics period in wall seconds; default 1
   odom_frame_id         (string, read-only)  header frame of `odom` (nav_msgs/Odometry); default
                                              odom
-  base_frame_id         (string, read-only)  child frame of `odom`; default base_link
+  base_frame_id         (string, read-only)  the body frame: child of `odom`, frame of velocity,
+                                             thrust, profile and Marker; default base_link
+  frame_prefix          (string, read-only)  prefix of both frames (robot_state_publisher's
+                                             frame_prefix; the namespace does not set it)
+  publish_tf            (bool, read-only)    odom -> body on /tf with every state, when tf2_msgs
+                                             is installed; default true
 """
 
 from __future__ import annotations
@@ -50,6 +57,7 @@ from pulsejet_sim.engine import session as eng
 from pulsejet_sim.interface import BASE_FRAME_ID, ODOM_FRAME_ID
 from pulsejet_sim.ros.executor import EXECUTOR_KINDS
 from pulsejet_sim.ros.node_params import (
+    declare as declare_spec,
     ParamSpec,
     scene_override_descriptor,
     scene_override_names,
@@ -135,6 +143,15 @@ PARAMETERS = (
         read_only=True,
     ),
     ParamSpec(
+        'wait_for_topics',
+        (),
+        'hold the simulation at t=0 until each of these topics has a subscriber; "*" = every '
+        'topic sim_node publishes but /tf (a recorder started beside it then holds t=0 on every '
+        'topic)',
+        read_only=True,
+        allowed='a list of topic names (relative ones resolved in the node namespace) or ["*"]',
+    ),
+    ParamSpec(
         'wait_timeout_s',
         10.0,
         'wall seconds to wait for subscribers before starting anyway',
@@ -199,9 +216,25 @@ PARAMETERS = (
     ParamSpec(
         'base_frame_id',
         BASE_FRAME_ID,
-        'body frame of the odometry twist (REP 105)',
+        'the body frame (REP 105): child of the odometry, frame of the velocity, thrust, mantle '
+        'profile and Marker',
         read_only=True,
         allowed='a frame name',
+    ),
+    ParamSpec(
+        'frame_prefix',
+        '',
+        'put in front of odom_frame_id and base_frame_id, as robot_state_publisher does (e.g. '
+        '"robot1/"; the namespace does not set it): two robots on one /tf keep their frames apart',
+        read_only=True,
+        allowed='a string, e.g. robot1/ (empty: none)',
+    ),
+    ParamSpec(
+        'publish_tf',
+        True,
+        'broadcast odom -> body on /tf with every state (when tf2_msgs is installed); false when '
+        'something else publishes that transform',
+        read_only=True,
     ),
 )
 PARAMETER_SPECS = {p.name: p for p in PARAMETERS}
@@ -217,9 +250,7 @@ LIVE_CONFIG = (
 
 def declare(node) -> dict[str, Any]:
     """Declare every parameter on `node` and return the checked values (ValueError: a bad one)."""
-    for spec in PARAMETERS:
-        node.declare_parameter(spec.name, spec.default, spec.descriptor())
-    return {spec.name: spec.check(node.get_parameter(spec.name).value) for spec in PARAMETERS}
+    return {spec.name: declare_spec(node, spec) for spec in PARAMETERS}
 
 
 def load_scene_from_parameters(node, values: dict[str, Any]):

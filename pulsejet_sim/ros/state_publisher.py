@@ -13,17 +13,35 @@ import math
 from typing import Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import TransformStamped
 import numpy as np
 from pulsejet_sim.engine.session import observation_is_finite
 from pulsejet_sim.ros import messages
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import Marker
 
 #: the meridian (tens of points) at most this often: at 1 kHz it would cost more than the rest of
 #: the state; every ledger publication carries one too
 PROFILE_RATE_MAX_HZ = 100.0
 QOS_DEPTH = 10
+#: odom -> body, as every ROS odometry source broadcasts it (absolute: robots sharing a domain
+#: share the TF tree, frame_prefix keeps their frames apart)
+TOPIC_TF = '/tf'
+TF_QOS_DEPTH = 100
+#: the header frame of what is not a place or a direction (diagnostics, the energy ledger), empty
+#: as diagnostic_updater leaves it: a frame would name something no TF tree holds
+NO_FRAME = ''
 
 Call = Callable[[], object]
+
+
+def tf_message_class():
+    """Return tf2_msgs' TFMessage, or None where tf2_msgs is not installed (the PyPI wheels)."""
+    try:
+        from tf2_msgs.msg import TFMessage
+    except ImportError:
+        return None
+    return TFMessage
 
 
 class StatePublisher:
@@ -31,10 +49,14 @@ class StatePublisher:
     The publishers of one simulated robot on `node`.
 
     sim: the Simulation (its profile and energy ledger are read when a state is built);
-    frames: (odom frame, body frame) of the odometry and the Marker.
+    frames: (odom frame, body frame), REP 105: the odometry's pose is in the first, everything
+    body-fixed (twist, velocity, thrust, profile, Marker) in the second;
+    publish_tf: odom -> body on /tf with every state, if tf2_msgs is installed (`has_tf` says).
     """
 
-    def __init__(self, node, sim, publish_rate_hz: float, frames: tuple[str, str]):
+    def __init__(
+        self, node, sim, publish_rate_hz: float, frames: tuple[str, str], publish_tf: bool = True
+    ):
         self.sim = sim
         self.frames = frames
         classes = {
@@ -53,8 +75,31 @@ class StatePublisher:
             topic: node.create_publisher(cls, topic, messages.reliable_qos(topic, QOS_DEPTH))
             for topic, cls in classes.items()
         }
+        self.tf_message = tf_message_class() if publish_tf else None
+        self.has_tf = self.tf_message is not None
+        if self.has_tf:
+            # tf2_ros's TransformBroadcaster: /tf (not namespaced), reliable, volatile, depth 100
+            self._pubs[TOPIC_TF] = node.create_publisher(
+                self.tf_message,
+                TOPIC_TF,
+                QoSProfile(depth=TF_QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
+            )
+        elif publish_tf:
+            node.get_logger().info(
+                f'no {TOPIC_TF}: tf2_msgs is not installed (odom -> {frames[1]} is in the '
+                f'odometry on {messages.TOPIC_ODOMETRY} only)'
+            )
         self._profile_every = max(1, int(math.ceil(publish_rate_hz / PROFILE_RATE_MAX_HZ - 1e-9)))
         self._states_built = 0
+
+    def topic_names(self) -> list[str]:
+        """
+        Return the resolved names of every topic published here but /tf.
+
+        /tf is shared by every node of the domain (and the recorder does not take it by default):
+        its subscribers say nothing about this node's.
+        """
+        return [pub.topic_name for topic, pub in self._pubs.items() if topic != TOPIC_TF]
 
     def _call(self, topic: str, msg) -> Call:
         return functools.partial(self._pubs[topic].publish, msg)
@@ -71,38 +116,57 @@ class StatePublisher:
             if not all(np.isfinite(arr).all() for arr in profile):
                 profile = None
         if profile is not None:  # before /clock, which the state's consumers take as its end
-            profile_msg = messages.profile_message(*profile, obs.time_s)
+            profile_msg = messages.profile_message(*profile, obs.time_s, self.frames[1])
             calls.append(self._call(messages.TOPIC_MANTLE_PROFILE, profile_msg))
-        for topic, msg in messages.observation_messages(obs, messages.FRAME_ID, *self.frames):
+        for topic, msg in messages.observation_messages(obs, self.frames[1], *self.frames):
             calls.append(self._call(topic, msg))
+            if topic == messages.TOPIC_ODOMETRY and self.has_tf:
+                calls.append(self._call(TOPIC_TF, self._transform(msg)))
         if ledger:
             calls += self.ledger(obs.time_s)
             marker = self._pubs.get(messages.TOPIC_MANTLE_MARKER)
-            # the 3-D view at the ledger's rate, in the odometry's body frame, and only while
-            # someone looks: its ~14000 points take ~15 ms of the GIL to build and send
+            # the 3-D view at the ledger's rate, in the body frame, and only while someone
+            # looks; serialised from arrays (its ~14000 points as Python objects held the
+            # interpreter ~15 ms), published as those bytes
             if profile is not None and marker.get_subscription_count():
                 calls.append(
                     functools.partial(
                         marker.publish,
-                        messages.mantle_marker(*profile, obs.time_s, self.frames[1]),
+                        messages.mantle_marker_cdr(*profile, obs.time_s, self.frames[1]),
                     )
                 )
         return calls
+
+    def _transform(self, odometry):
+        """Return the odometry's pose as the odom -> body transform (a TFMessage of one)."""
+        t = TransformStamped()
+        t.header = odometry.header
+        t.child_frame_id = odometry.child_frame_id
+        position = odometry.pose.pose.position
+        t.transform.translation.x = position.x
+        t.transform.translation.y = position.y
+        t.transform.translation.z = position.z
+        t.transform.rotation = odometry.pose.pose.orientation
+        return self.tf_message(transforms=[t])
 
     def ledger(self, time_s: float) -> list[Call]:
         """Return the energy ledger's publish call (none while a value is not finite)."""
         values = self.sim.energy_ledger()
         if not all(math.isfinite(v) for v in values.values()):
             return []
-        return [self._call(messages.TOPIC_ENERGY_LEDGER, messages.ledger_message(values, time_s))]
+        msg = messages.ledger_message(values, time_s, NO_FRAME)
+        return [self._call(messages.TOPIC_ENERGY_LEDGER, msg)]
 
     def applied(self, command, time_s: float) -> Call:
         """Return the publish call of the command held from `time_s` on."""
         return self._call(
-            messages.TOPIC_APPLIED_COMMAND, messages.applied_command_message(command, time_s)
+            messages.TOPIC_APPLIED_COMMAND,
+            messages.applied_command_message(command, time_s, NO_FRAME),
         )
 
     def diagnostics(self, level: str, name: str, hardware_id: str, message: str, values) -> None:
         """Publish sim_node's health (level OK | WARN | ERROR) now, at the simulation time."""
-        msg = messages.health_message(level, name, hardware_id, message, values, self.sim.time_s)
+        msg = messages.health_message(
+            level, name, hardware_id, message, values, self.sim.time_s, NO_FRAME
+        )
         self._pubs[messages.TOPIC_DIAGNOSTICS].publish(msg)
