@@ -17,7 +17,7 @@ $(STAMP): requirements.txt setup.py setup.cfg
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps -e .
 	# pip's editable install does not run setup.py develop, whose hook warms numba's cache:
 	# compile the shipped scenes' kernels once here, so no node compiles at its first start
-	$(PY) -m pulsejet_sim.warmup --quiet
+	$(PY) -m pulsejet_sim.engine.warmup --quiet
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -3,7 +3,7 @@ ament_python build of pulsejet_sim (colcon build, ros2 run pulsejet_sim <executa
 
 After installing, `setup.py install` (colcon build) and `setup.py develop` (colcon build
 --symlink-install) compile the physics kernels of every shipped scene into numba's on-disk cache
-for the installed copy (pulsejet_sim/warmup.py, in a subprocess), so that the first start of
+for the installed copy (pulsejet_sim/engine/warmup.py, in a subprocess), so that the first start of
 sim_node does not spend ~20 s compiling.  A failed warm-up prints a warning and never fails the
 build (the node then compiles at its first start).  PULSEJET_SKIP_NUMBA_WARMUP=1 skips it; an
 install into a staging --root (wheels, Debian packages) skips it too: numba's cache belongs to the
@@ -33,13 +33,13 @@ WARMUP_TIMEOUT_ENV = 'PULSEJET_NUMBA_WARMUP_TIMEOUT_S'
 # run in a fresh interpreter with the installed tree first on sys.path (not the source tree)
 _WARMUP_CODE = (
     'import sys; sys.path.insert(0, sys.argv[1]); '
-    'from pulsejet_sim.warmup import main; sys.exit(main(sys.argv[2:]))'
+    'from pulsejet_sim.engine.warmup import main; sys.exit(main(sys.argv[2:]))'
 )
 
 
 def warm_numba_cache(import_root):
     """
-    Run pulsejet_sim.warmup against the package importable from import_root.
+    Run pulsejet_sim.engine.warmup against the package importable from import_root.
 
     One log line. Returns the cache files written under import_root (for the install record);
     never raises.
@@ -208,7 +208,7 @@ setup(
             'recorder = pulsejet_sim.ros.recorder:main',
             'replay = pulsejet_sim.ros.replay:main',
             'pulsejet = pulsejet_sim.cli:main',
-            'pulsejet_warmup = pulsejet_sim.warmup:main',
+            'pulsejet_warmup = pulsejet_sim.engine.warmup:main',
         ],
     },
 )

@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_common import cpu_model  # noqa: E402
-from pulsejet_sim.sweep import load_sweep, open_executor, run_sweep, RunSpec  # noqa: E402
+from pulsejet_sim.studies.sweep import load_sweep, open_executor, run_sweep, RunSpec  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / 'results' / 'dask.md'
 

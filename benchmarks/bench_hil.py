@@ -78,7 +78,7 @@ def run_rate(
     sim_executor: str = 'single',
 ) -> dict:
     from diagnostic_msgs.msg import DiagnosticArray
-    from pulsejet_sim.models.base import Command
+    from pulsejet_sim.core.model_io import Command
     from pulsejet_sim.ros import messages
     from pulsejet_sim.ros.executor import make_executor
     from pulsejet_sim.ros.harness import NodeProcess

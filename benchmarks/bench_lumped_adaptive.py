@@ -27,10 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_common import header, write  # noqa: E402
 import numpy as np  # noqa: E402
-from pulsejet_sim.models import lumped_kernels as K  # noqa: E402
-from pulsejet_sim.models.base import SimulationBlowUp  # noqa: E402
-from pulsejet_sim.runner import Drive  # noqa: E402
+from pulsejet_sim.core.model_io import SimulationBlowUp  # noqa: E402
+from pulsejet_sim.models.lumped import kernels as K  # noqa: E402
 from pulsejet_sim.scene import load_scene  # noqa: E402
+from pulsejet_sim.studies.runner import Drive  # noqa: E402
 
 PUBLISH_S = 0.01
 DURATION = {'escape': 3.0, 'pump_cycle': 10.0}

@@ -27,9 +27,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--repeats', type=int, default=200)
     args = parser.parse_args()
+    from pulsejet_sim.engine.simulation import Simulation
     from pulsejet_sim.ros import messages
     from pulsejet_sim.scene import load_scene
-    from pulsejet_sim.simulation import Simulation
     from rclpy.serialization import serialize_message
 
     sim = Simulation(load_scene('shell_robot', command_driven=True).model)

@@ -38,8 +38,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import bench_common  # noqa: E402
 from pulsejet_sim import analysis  # noqa: E402
-from pulsejet_sim.runner import Drive, LEDGER_PERIOD_S, run_scene  # noqa: E402
 from pulsejet_sim.scene import load_scene  # noqa: E402
+from pulsejet_sim.studies.runner import Drive, LEDGER_PERIOD_S, run_scene  # noqa: E402
 
 SCENES = ('shell_robot', 'pump_cycle')
 TARGET_RATIO = 0.7  # issue: `pulsejet run` at >= 0.7x the speed of the physics with observations
@@ -81,6 +81,7 @@ def record_with_rclpy(name: str, duration_s: float, out: Path) -> float:
     """Record as the runner did before bag.cdr: an rclpy message per sample, rclpy-serialised."""
     from pulsejet_sim.bag.writer import BagWriter
     from pulsejet_sim.ros import messages
+    from pulsejet_sim.ros.bag_messages import write_message
 
     scene = load_scene(name)
     start = time.perf_counter()
@@ -92,15 +93,14 @@ def record_with_rclpy(name: str, duration_s: float, out: Path) -> float:
     def write_state(obs, ledger):
         ns = messages.stamp_ns(obs.time_s)
         for topic, msg in messages.observation_messages(obs):
-            writer.write_message(topic, msg, ns)
+            write_message(writer, topic, msg, ns)
         profile = sim.profile()
         if profile is not None:
-            writer.write_message(
-                messages.TOPIC_MANTLE_PROFILE, messages.profile_message(*profile, obs.time_s), ns
-            )
+            msg = messages.profile_message(*profile, obs.time_s)
+            write_message(writer, messages.TOPIC_MANTLE_PROFILE, msg, ns)
         if ledger:
-            writer.write_message(
-                messages.TOPIC_ENERGY_LEDGER,
+            write_message(
+                writer, messages.TOPIC_ENERGY_LEDGER,
                 messages.ledger_message(sim.energy_ledger(), obs.time_s),
                 ns,
             )
@@ -110,10 +110,10 @@ def record_with_rclpy(name: str, duration_s: float, out: Path) -> float:
     for start_s, command, obs in drive:
         ns = messages.stamp_ns(start_s)
         for topic, msg in messages.command_messages(command):
-            writer.write_message(topic, msg, ns)
+            write_message(writer, topic, msg, ns)
         if command != last:
-            writer.write_message(
-                messages.TOPIC_APPLIED_COMMAND,
+            write_message(
+                writer, messages.TOPIC_APPLIED_COMMAND,
                 messages.applied_command_message(command, start_s),
                 ns,
             )

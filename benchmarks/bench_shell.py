@@ -58,9 +58,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_common import cpu_model as _cpu_model  # noqa: E402
 import numpy as np  # noqa: E402
-from pulsejet_sim.models.base import SimulationBlowUp  # noqa: E402
+from pulsejet_sim.core.model_io import SimulationBlowUp  # noqa: E402
+from pulsejet_sim.engine.simulation import Simulation  # noqa: E402
 from pulsejet_sim.scene import load_scene, SceneError  # noqa: E402
-from pulsejet_sim.simulation import Simulation  # noqa: E402
 
 SCENE = 'shell_robot'
 RESULTS_MD = HERE / 'results' / 'shell_speed_accuracy.md'

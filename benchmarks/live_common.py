@@ -18,7 +18,7 @@ import time
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from pulsejet_sim import interface  # noqa: E402
+from pulsejet_sim.core import topics  # noqa: E402
 from pulsejet_sim.ros.harness import default_domain_id, NodeProcess  # noqa: E402
 
 
@@ -123,16 +123,16 @@ class LiveClient:
         self.qos = qos
         if state_topics:  # (a soak at 1 kHz leaves them out: this process would not keep up)
             for topic in (
-                interface.TOPIC_MANTLE_RADIUS,
-                interface.TOPIC_VOLUME,
-                interface.TOPIC_FLUID_MASS,
+                topics.TOPIC_MANTLE_RADIUS,
+                topics.TOPIC_VOLUME,
+                topics.TOPIC_FLUID_MASS,
             ):
                 self.node.create_subscription(
                     Float64, topic, lambda m, t=topic: w.check(t, (m.data,)), qos
                 )
             self.node.create_subscription(
                 TwistStamped,
-                interface.TOPIC_VELOCITY,
+                topics.TOPIC_VELOCITY,
                 lambda m: w.check(
                     'velocity', (m.twist.linear.x, m.twist.linear.y, m.twist.linear.z)
                 ),
@@ -140,7 +140,7 @@ class LiveClient:
             )
             self.node.create_subscription(
                 WrenchStamped,
-                interface.TOPIC_THRUST,
+                topics.TOPIC_THRUST,
                 lambda m: w.check(
                     'thrust', (m.wrench.force.x, m.wrench.force.y, m.wrench.force.z)
                 ),
@@ -148,7 +148,7 @@ class LiveClient:
             )
             self.node.create_subscription(
                 Odometry,
-                interface.TOPIC_ODOMETRY,
+                topics.TOPIC_ODOMETRY,
                 lambda m: w.check(
                     'odom',
                     (m.pose.pose.position.x, m.pose.pose.orientation.w, m.twist.twist.linear.x),
@@ -157,9 +157,9 @@ class LiveClient:
             )
         self.clock_subscribed = clock
         if clock:  # else simulated time comes from the 1 Hz /diagnostics stamps (light at 1 kHz)
-            self.node.create_subscription(Clock, interface.TOPIC_CLOCK, self._on_clock, qos)
+            self.node.create_subscription(Clock, topics.TOPIC_CLOCK, self._on_clock, qos)
         self.node.create_subscription(
-            DiagnosticArray, interface.TOPIC_DIAGNOSTICS, self._on_diagnostics, qos
+            DiagnosticArray, topics.TOPIC_DIAGNOSTICS, self._on_diagnostics, qos
         )
 
     def _on_clock(self, msg) -> None:

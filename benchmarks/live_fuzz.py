@@ -46,7 +46,7 @@ from live_common import (  # noqa: E402
     ParamProbe,
     rss_bytes,
 )
-from pulsejet_sim import interface  # noqa: E402
+from pulsejet_sim.core import topics  # noqa: E402
 
 WEIRD = (float('nan'), float('inf'), -float('inf'), 1e308, -1e308, -1.0, 5e-324, 0.0)
 SERVICE_TIMEOUT_S = 10.0
@@ -96,15 +96,15 @@ class Flood:
         node = client.node
         self.float_pubs = {
             topic: node.create_publisher(Float64, topic, client.qos)
-            for topic in interface.COMMAND_TOPICS
+            for topic in topics.COMMAND_TOPICS
         }
         self.command_pub = node.create_publisher(
-            JointState, interface.TOPIC_CMD_COMMAND, client.qos
+            JointState, topics.TOPIC_CMD_COMMAND, client.qos
         )
         self.services = {
-            'pause': node.create_client(SetBool, interface.SERVICE_PAUSE),
-            'step': node.create_client(Trigger, interface.SERVICE_STEP),
-            'reset': node.create_client(Trigger, interface.SERVICE_RESET),
+            'pause': node.create_client(SetBool, topics.SERVICE_PAUSE),
+            'step': node.create_client(Trigger, topics.SERVICE_STEP),
+            'reset': node.create_client(Trigger, topics.SERVICE_RESET),
             'set_parameters': node.create_client(SetParameters, '/sim_node/set_parameters'),
         }
         self.sent = {
@@ -136,9 +136,9 @@ class Flood:
     def _actuator(self):
         from std_msgs.msg import Float64
 
-        topic = self.rng.choice(interface.COMMAND_TOPICS)
+        topic = self.rng.choice(topics.COMMAND_TOPICS)
         self.float_pubs[topic].publish(
-            Float64(data=actuator_value(self.rng, interface.COMMAND_FIELDS[topic]))
+            Float64(data=actuator_value(self.rng, topics.COMMAND_FIELDS[topic]))
         )
         self.sent['actuator'] += 1
 
@@ -150,7 +150,7 @@ class Flood:
             self.command_pub.publish(self._last_command)
             self.sent['duplicate'] += 1
             return
-        names = rng.sample(interface.APPLIED_COMMAND_NAMES, rng.randint(0, 3))
+        names = rng.sample(topics.APPLIED_COMMAND_NAMES, rng.randint(0, 3))
         if rng.random() < 0.05:
             names.append(
                 rng.choice(['thrust', '', 'valve_opening ', 'pump_flow_m3_s'])
@@ -158,7 +158,7 @@ class Flood:
         msg = JointState()
         msg.name = names
         msg.position = [
-            actuator_value(rng, n) if n in interface.APPLIED_COMMAND_NAMES else 1.0 for n in names
+            actuator_value(rng, n) if n in topics.APPLIED_COMMAND_NAMES else 1.0 for n in names
         ]
         if rng.random() < 0.05:
             msg.position = msg.position[:-1] or [1.0, 2.0]  # lengths differ

@@ -77,7 +77,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import paper000_study as study  # noqa: E402
-from pulsejet_sim.sweep import load_sweep, merge, run_one, RunRow, RunSpec  # noqa: E402
+from pulsejet_sim.studies.sweep import load_sweep, merge, run_one, RunRow, RunSpec  # noqa: E402
 
 MODULI = {'E20k': 20000.0, 'E40k': 40000.0, 'E80k': 80000.0}
 # Experiments A-F ran on the study's first version, whose routines were 30 % / 45 % half cosines

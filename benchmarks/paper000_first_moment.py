@@ -30,10 +30,10 @@ import bench_common  # noqa: E402
 import numpy as np  # noqa: E402
 import paper000_experiments as experiments  # noqa: E402
 import paper000_study as study  # noqa: E402
-from pulsejet_sim.models import shell_kernels as sk  # noqa: E402
-from pulsejet_sim.models.base import Command  # noqa: E402
+from pulsejet_sim.core.model_io import Command  # noqa: E402
+from pulsejet_sim.models.shell import kernels as sk  # noqa: E402
 from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.sweep import load_sweep, merge  # noqa: E402
+from pulsejet_sim.studies.sweep import load_sweep, merge  # noqa: E402
 
 OUT = study.OUT / 'first_moment.md'
 FLOWING = 0.3  # of the run's largest |V'|: the steps where the momentum matters

@@ -24,10 +24,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import paper000_study as study  # noqa: E402
-from pulsejet_sim.models.base import SimulationBlowUp  # noqa: E402
+from pulsejet_sim.core.model_io import SimulationBlowUp  # noqa: E402
+from pulsejet_sim.engine.simulation import Simulation  # noqa: E402
 from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.simulation import Simulation  # noqa: E402
-from pulsejet_sim.sweep import load_sweep, merge  # noqa: E402
+from pulsejet_sim.studies.sweep import load_sweep, merge  # noqa: E402
 
 OUT = study.OUT / 'frequency.md'
 CASE = 'internal/paper/ellipsoid/E20k/T0.66'

@@ -20,7 +20,7 @@ import time
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.sweep import load_sweep, merge, run_one, RunSpec  # noqa: E402
+from pulsejet_sim.studies.sweep import load_sweep, merge, run_one, RunSpec  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / 'results' / 'paper000_study'
 CORNERS = (

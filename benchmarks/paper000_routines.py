@@ -31,9 +31,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench_common import header, write  # noqa: E402
 import paper000_study as study  # noqa: E402
+from pulsejet_sim.engine.simulation import Simulation  # noqa: E402
 from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.simulation import Simulation  # noqa: E402
-from pulsejet_sim.sweep import load_sweep, merge  # noqa: E402
+from pulsejet_sim.studies.sweep import load_sweep, merge  # noqa: E402
 
 CYCLES_CSV = study.OUT / 'routines.csv'
 LAGS_S = (0.019, 0.0375, 0.075, 0.12, 0.25, 0.5, 1.0)

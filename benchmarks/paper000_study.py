@@ -28,7 +28,9 @@ import time
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.sweep import load_sweep, merge, plot_bars, run_sweep, RunSpec  # noqa: E402
+from pulsejet_sim.studies.sweep import (  # noqa: E402
+    load_sweep, merge, plot_bars, run_sweep, RunSpec
+)
 
 OUT = Path(__file__).resolve().parent / 'results' / 'paper000_study'
 SWEEP = 'paper000_study'

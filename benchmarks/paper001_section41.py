@@ -4,7 +4,7 @@ Numerical experiment (not a test): paper 001, section 4.1, under each reading of
 Runs the escape scene (config/escape.yaml, values from the paper's text) in both couplings
 (`paper` = eqs. 1 and 3 as written, `consistent` = energy-consistent) and under the alternative
 readings of the text that the copy garbled, measures the figures the paper reports (definitions
-in pulsejet_sim/models/lumped_figures.py and docs/PHYSICS_LUMPED.md), reruns every case at dt/2 to
+in pulsejet_sim/studies/section41.py and docs/PHYSICS_LUMPED.md), reruns every case at dt/2 to
 show the figures are converged, and writes benchmarks/results/paper001_section41.md.
 
     .venv/bin/python benchmarks/paper001_section41.py
@@ -21,9 +21,9 @@ import sys
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.models import lumped_kernels as K  # noqa: E402
-from pulsejet_sim.models.lumped_figures import section41_figures  # noqa: E402
+from pulsejet_sim.models.lumped import kernels as K  # noqa: E402
 from pulsejet_sim.scene import load_scene, SceneError  # noqa: E402
+from pulsejet_sim.studies.section41 import section41_figures  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / 'results' / 'paper001_section41.md'
 COMMAND = '.venv/bin/python benchmarks/paper001_section41.py'
@@ -257,7 +257,7 @@ def main() -> None:
             f"Scene `config/escape.yaml` (values from the paper's section 4.1), {DURATION_S:g} s"
             ' or until the run stops on a bound, dt = 1e-4 s RK4, rerun at dt/2 (last column:'
             ' largest relative change of 90 % out, shares, k_x/k, peak speed, settled mass and'
-            ' collapse time). Definitions: `pulsejet_sim/models/lumped_figures.py`,'
+            ' collapse time). Definitions: `pulsejet_sim/studies/section41.py`,'
             ' `docs/PHYSICS_LUMPED.md`. "created" = sum of the `created_*` ledger keys at the end'
             ' (energy that the applied equations make beyond the energy-consistent ones);'
             ' "closure" = stored - in + out - created.'

@@ -58,7 +58,7 @@ from live_common import (  # noqa: E402
     percentile,
     rss_bytes,
 )
-from pulsejet_sim import interface  # noqa: E402
+from pulsejet_sim.core import topics  # noqa: E402
 
 RSS_PERIOD_S = 10.0
 CONTROLLERS = {
@@ -69,10 +69,10 @@ CONTROLLERS = {
 RTF_TOLERANCE = 0.01
 RSS_GROWTH_LIMIT = 0.05
 RECORDED_TOPICS = [
-    interface.TOPIC_CLOCK,
-    interface.TOPIC_APPLIED_COMMAND,
-    f'{interface.TOPIC_DIAGNOSTICS}:diagnostic_msgs/msg/DiagnosticArray',
-    *interface.COMMAND_TOPICS,  # the controller's commands: their send times locate a stall
+    topics.TOPIC_CLOCK,
+    topics.TOPIC_APPLIED_COMMAND,
+    f'{topics.TOPIC_DIAGNOSTICS}:diagnostic_msgs/msg/DiagnosticArray',
+    *topics.COMMAND_TOPICS,  # the controller's commands: their send times locate a stall
 ]
 TRIP_LINE = re.compile(r'\[WARN\] \[(\d+\.\d+)\] \[sim_node\]: command watchdog tripped')
 TRIP_WINDOW_S = 0.5  # gaps are looked for in this much wall time before a trip is logged
@@ -262,7 +262,7 @@ def trip_evidence(path: Path, trips: list[float]) -> list[dict]:
 
     if not trips:
         return []
-    commands = {'/' + t for t in interface.COMMAND_TOPICS}
+    commands = {'/' + t for t in topics.COMMAND_TOPICS}
     times = {'command': ([], []), 'clock': ([], [])}  # (send, receive) in s, system clock
     try:
         with open(path, 'rb') as fh:
@@ -270,7 +270,7 @@ def trip_evidence(path: Path, trips: list[float]) -> list[dict]:
                 key = (
                     'command'
                     if channel.topic in commands
-                    else 'clock' if channel.topic == interface.TOPIC_CLOCK else None
+                    else 'clock' if channel.topic == topics.TOPIC_CLOCK else None
                 )
                 if key is not None:
                     times[key][0].append(record.publish_time * 1e-9)
@@ -308,7 +308,7 @@ def clock_receive_times_ns(path: Path) -> list[int]:
 
     try:
         with AnyReader([path]) as reader:
-            clock = [c for c in reader.connections if c.topic == interface.TOPIC_CLOCK]
+            clock = [c for c in reader.connections if c.topic == topics.TOPIC_CLOCK]
             return sorted(t for _, t, _ in reader.messages(connections=clock))
     except Exception:  # read_back names the failure in the table
         return []

@@ -38,9 +38,9 @@ SCENES = ('pump_cycle', 'escape')
 
 
 def probe(scene_name: str) -> list[dict]:
-    from pulsejet_sim.models.base import Command, CommandError, SimulationBlowUp
+    from pulsejet_sim.core.model_io import Command, CommandError, SimulationBlowUp
+    from pulsejet_sim.engine.simulation import Simulation
     from pulsejet_sim.scene import load_scene
-    from pulsejet_sim.simulation import Simulation
 
     scene = load_scene(scene_name, command_driven=True)
     sim = Simulation(scene.model)
@@ -109,7 +109,7 @@ def main(argv=None) -> int:
         capture_output=True,
         text=True,
     ).stdout.strip()
-    from pulsejet_sim.models.base import VALVE_MIN_OPENING
+    from pulsejet_sim.core.model_io import VALVE_MIN_OPENING
 
     now = datetime.datetime.now(datetime.timezone.utc)
     modified = ' (pulsejet_sim/ modified)' if dirty else ''

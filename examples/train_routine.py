@@ -11,8 +11,8 @@ Cost of transport (dimensionless, lower is better) of a run of `--duration` simu
 rest: the actuation work (`in_actuation_work` of the energy ledger: the pump's work) divided by
 (total mass x 9.81 m/s^2 x distance), the total mass being the vehicle's dry mass plus the
 time-mean fluid mass in its cavity, the distance the integral of the forward velocity
-(`pulsejet_sim.optimize.routine_run`). The routine (`PumpValveRoutine`, the lumped model's
-pump/valve state machine of `pulsejet_ctrl/routines.py`) inflates for `inflate_s` at
+(`pulsejet_sim.studies.optimize.routine_run`). The routine (`PumpValveRoutine`, the lumped model's
+pump/valve state machine of `pulsejet_sim.routines`) inflates for `inflate_s` at
 `pump_flow_m3_s`, holds `hold_s`, jets `jet_s`, and repeats; the inflation is timed
 (`target_volume_m3: 0`), so the live controller's commands depend on simulated time alone.
 
@@ -21,8 +21,9 @@ time (`--min-distance-share 1.0` of its distance); without it the cheapest "swim
 barely moving vehicle. A design short of it costs its cost of transport plus the missing share
 of the distance (a soft penalty, so the search is led back to feasible designs).
 
-The search is `pulsejet_sim.optimize.differential_evolution` (gradient-free, no deep-learning
-stack), each generation's runs on the executor. Outputs (`--out`, default examples/results/):
+The search is `pulsejet_sim.studies.optimize.differential_evolution` (gradient-free, no
+deep-learning stack), each generation's runs on the executor. Outputs (`--out`, default
+examples/results/):
 - `pump_cycle_trained.yaml`: the scene with the trained routine written in, e.g.
       .venv/bin/sim_node --ros-args -p scene:=examples/results/pump_cycle_trained.yaml
       .venv/bin/controller_node --ros-args -p scene:=examples/results/pump_cycle_trained.yaml
@@ -44,8 +45,10 @@ import time
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.optimize import differential_evolution, routine_run, scene_mapping  # noqa: E402
-from pulsejet_sim.sweep import executor_label, open_executor, SweepError  # noqa: E402
+from pulsejet_sim.studies.optimize import (  # noqa: E402
+    differential_evolution, routine_run, scene_mapping
+)
+from pulsejet_sim.studies.sweep import executor_label, open_executor, SweepError  # noqa: E402
 import yaml  # noqa: E402
 
 #: routine field -> (low, high): the searched box

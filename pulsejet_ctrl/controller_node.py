@@ -1,10 +1,10 @@
 """
-ROS 2 node that runs a routine of `pulsejet_ctrl.routines` on the node's ROS clock.
+ROS 2 node that runs a routine of `pulsejet_sim.routines` on the node's ROS clock.
 
 It follows the node's ROS clock (simulation time from /clock through rclpy's time source,
 `use_sim_time`) and publishes pump/valve/cable commands.
 
-A thin adapter: the state machine lives in `pulsejet_ctrl.routines` (PumpValveRoutine, or
+A thin adapter: the state machine lives in `pulsejet_sim.routines` (PumpValveRoutine, or
 CableRoutine for a shell scene whose cable follows a routine: the scene is loaded command-driven,
 so the simulator takes the cable force from here). The routine is evaluated at `rate_hz` of the
 node's clock (`self.get_clock()`): with `use_sim_time` (the default here) that is *simulation*
@@ -53,8 +53,8 @@ from __future__ import annotations
 import math
 import sys
 
-from pulsejet_ctrl import routines as _routines
-from pulsejet_sim.models.schema import Choice
+from pulsejet_sim import routines as _routines
+from pulsejet_sim.core.schema import Choice
 from pulsejet_sim.ros import messages
 from pulsejet_sim.ros.node_params import check_parameters, declare, ParamSpec
 from pulsejet_sim.scene import DEFAULT_SCENE
@@ -84,7 +84,7 @@ ROUTINE_FIELDS = {
     'release_s': 's of the release of the pull (see pulse)',
 }
 INTEGER_FIELDS = ('cycles',)
-#: routine kind -> field -> pulsejet_sim.models.schema.Number (default, range)
+#: routine kind -> field -> pulsejet_sim.core.schema.Number (default, range)
 ROUTINE_SPECS = {'pump_valve': _routines.PUMP_VALVE_SPEC, 'cable': _routines.CABLE_SPEC}
 #: wall seconds between re-sends of the t = 0 command while the ROS clock reads 0 (not started)
 STANDBY_PERIOD_S = 0.2
@@ -95,7 +95,7 @@ class ControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('controller_node', **kwargs)
-        from pulsejet_ctrl import routines
+        from pulsejet_sim import routines
         from pulsejet_sim.scene import load_scene
 
         self._specs = {}

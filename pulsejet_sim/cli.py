@@ -30,8 +30,8 @@ def _run(argv: list[str]) -> int:
     parser.add_argument('--no-plot', action='store_true', help='do not write the PNG plot')
     args = parser.parse_args(argv)
     from pulsejet_sim import analysis
-    from pulsejet_sim.runner import default_output, run_scene
     from pulsejet_sim.scene import load_scene, SceneError
+    from pulsejet_sim.studies.runner import default_output, run_scene
 
     try:
         overrides = {'simulation': {'dt_s': args.dt}} if args.dt is not None else None
@@ -77,33 +77,40 @@ def _lazy(module: str, function: str):
 #: command -> (what it does, its entry point); each entry point parses its own options (argparse)
 COMMANDS = {
     'run': ('run a scene offline (no DDS) and record it to MCAP', _run),
-    'summary': ('key numbers of a recording (live or offline)', _lazy('analysis', 'main_summary')),
+    'summary': (
+        'key numbers of a recording (live or offline)',
+        _lazy('analysis.summary', 'main_summary'),
+    ),
     'plot': (
         'radius, volume, velocity and thrust of a recording as a PNG (+ mantle snapshots over a '
         'cycle for shell runs)',
-        _lazy('analysis', 'main_plot'),
+        _lazy('analysis.summary', 'main_plot'),
     ),
     'animate': (
         'the mantle section of a shell recording as a GIF or MP4',
-        _lazy('profiles', 'main_animate'),
+        _lazy('analysis.profiles', 'main_animate'),
     ),
     'resim': (
         're-simulate a recording from its applied commands and compare',
-        _lazy('resim', 'main_resim'),
+        _lazy('studies.resim', 'main_resim'),
     ),
     'repair': (
         'write a complete copy of a damaged recording, metadata kept',
         _lazy('bag.repair', 'main_repair'),
     ),
-    'sweep': ('a grid of scenes on a process pool or Dask', _lazy('sweep', 'main_sweep')),
-    'fit': ('calibrate scene parameters to figures or a recording', _lazy('fit', 'main_fit')),
+    'sweep': (
+        'a grid of scenes on a process pool or Dask', _lazy('studies.sweep', 'main_sweep')
+    ),
+    'fit': (
+        'calibrate scene parameters to figures or a recording', _lazy('studies.fit', 'main_fit')
+    ),
     'optimize': (
         'search scene parameters (differential evolution) on a process pool or Dask',
-        _lazy('optimize', 'main_optimize'),
+        _lazy('studies.optimize', 'main_optimize'),
     ),
     'validate': (
         'predicted against measured figures of real robots: docs/validation/ report',
-        _lazy('validation', 'main_validate'),
+        _lazy('studies.validation', 'main_validate'),
     ),
     'scenes': ('list the scenes under config/', _scenes),
 }

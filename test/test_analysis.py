@@ -6,8 +6,9 @@ from pathlib import Path
 
 from pulsejet_sim import analysis
 from pulsejet_sim.bag.writer import BagWriter
-from pulsejet_sim.models.base import Command, Observation
+from pulsejet_sim.core.model_io import Command, Observation
 from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.bag_messages import write_message
 import pytest
 
 DT_S = 0.01
@@ -46,7 +47,7 @@ def run_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
             for topic, msg in messages.observation_messages(
                 observation(t)
             ) + messages.command_messages(Command()):
-                bag.write_message(topic, msg, log_ns)
+                write_message(bag, topic, msg, log_ns)
             if i % 50 == 0:
                 ledger = {
                     'stored_elastic': 0.1 * t,
@@ -54,8 +55,8 @@ def run_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
                     'closure_error': 0.0,
                     'closure_relative': 0.0 if t < 1.5 else 0.08,
                 }
-                bag.write_message(
-                    'pulsejet/energy_ledger', messages.ledger_message(ledger, t), log_ns
+                write_message(
+                    bag, 'pulsejet/energy_ledger', messages.ledger_message(ledger, t), log_ns
                 )
     return path
 
@@ -128,8 +129,8 @@ def test_bad_input_one_line_error_exit_2(
         path.write_text('this is not an mcap file\n')
     elif kind == 'no_pulsejet_topics':
         with BagWriter(path) as bag:
-            bag.write_message(
-                'other/topic', messages.message_class('pulsejet/volume')(data=1.0), 0
+            write_message(
+                bag, 'other/topic', messages.message_class('pulsejet/volume')(data=1.0), 0
             )
     elif kind == 'directory':
         path.mkdir()
@@ -153,7 +154,7 @@ def test_real_time_factor_of_a_live_recording(tmp_path: Path) -> None:
         for i in range(round(DURATION_S / DT_S) + 1):
             t = i * DT_S
             for topic, msg in messages.observation_messages(observation(t)):
-                bag.write_message(topic, msg, wall0_ns + round(2 * t * 1e9))
+                write_message(bag, topic, msg, wall0_ns + round(2 * t * 1e9))
     assert analysis.summarize(path)['real_time_factor'] == pytest.approx(0.5)
     assert 'real-time factor    0.5' in analysis.format_summary(analysis.summarize(path))
 
@@ -167,7 +168,7 @@ def test_plots_leave_the_callers_matplotlib_alone(run_file: Path, tmp_path: Path
     """
     import matplotlib
     import matplotlib.pyplot as plt
-    from pulsejet_sim.sweep import plot_bars, RunRow
+    from pulsejet_sim.studies.sweep import plot_bars, RunRow
 
     matplotlib.use('svg')
     try:

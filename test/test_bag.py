@@ -16,10 +16,12 @@ import time
 
 from mcap.reader import make_reader
 from pulsejet_sim.bag import msgdefs
-from pulsejet_sim.bag.reader import bag_info, BagReadError, load_series, read_bag, repair
+from pulsejet_sim.bag.reader import bag_info, BagReadError, load_series, read_bag
+from pulsejet_sim.bag.repair import repair
 from pulsejet_sim.bag.writer import BagError, BagWriter, install_signal_handlers
-from pulsejet_sim.models.base import Command, Observation
+from pulsejet_sim.core.model_io import Command, Observation
 from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.bag_messages import write_message
 import pytest
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
@@ -212,11 +214,11 @@ def test_headerless_topics_mapped_to_sim_time_through_clock(tmp_path: Path) -> N
         for i in range(10):
             sim_s = 5.0 + 0.1 * i
             wall = wall0 + i * 50_000_000  # half real time: 0.05 s wall per 0.1 s sim
-            bag.write_message(
-                '/clock', messages.message_class('/clock')(clock=messages.stamp(sim_s)), wall
+            write_message(
+                bag, '/clock', messages.message_class('/clock')(clock=messages.stamp(sim_s)), wall
             )
             volume = messages.message_class('pulsejet/volume')(data=float(i))
-            bag.write_message('pulsejet/volume', volume, wall + 25_000_000)
+            write_message(bag, 'pulsejet/volume', volume, wall + 25_000_000)
     t, v = load_series(path)['/pulsejet/volume']
     assert t[:9] == pytest.approx([5.05 + 0.1 * i for i in range(9)])
 

@@ -12,11 +12,11 @@ import math
 
 import numpy as np
 from pulsejet_sim.bag import cdr
-from pulsejet_sim.interface import TOPIC_TYPES
-from pulsejet_sim.models.base import Command, Observation
+from pulsejet_sim.core.model_io import Command, Observation
+from pulsejet_sim.core.topics import TOPIC_TYPES
+from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.ros import messages
 from pulsejet_sim.scene import load_scene
-from pulsejet_sim.simulation import Simulation
 import pytest
 from rclpy.serialization import serialize_message
 from rosbags.interfaces import Nodetype

@@ -6,8 +6,9 @@ It builds as a ROS 2 ament_python package.
 Uses colcon-core + colcon-ros from the venv (no system ROS). The repository is copied into
 <tmp>/src/pulsejet_sim (without .venv, build, install, log, runs, .git) so the build leaves the
 working tree untouched.  The build also warms numba's compile cache for the installed kernels
-(setup.py, pulsejet_sim/warmup.py): the installed node must load every kernel from that cache and
-compile nothing (checked from numba's NUMBA_DEBUG_CACHE output, not from wall-clock time).
+(setup.py, pulsejet_sim/engine/warmup.py): the installed node must load every kernel from that
+cache and compile nothing (checked from numba's NUMBA_DEBUG_CACHE output, not from wall-clock
+time).
 """
 
 from __future__ import annotations
@@ -178,7 +179,7 @@ def test_build_warms_numba_cache_of_installed_kernels(workspace):
         line for line in out.splitlines() if 'numba' in line or 'warm' in line
     )
     cache = site_packages(workspace) / PACKAGE / 'models' / '__pycache__'
-    for module in ('lumped_kernels', 'shell_kernels'):
+    for module in ('lumped.kernels', 'shell.kernels'):
         index = list(cache.glob(f'{module}.advance-*.nbi'))
         data = list(cache.glob(f'{module}.advance-*.nbc'))
         assert index and data, f'no numba cache of {module}.advance in {cache}: ' + ', '.join(
@@ -188,7 +189,7 @@ def test_build_warms_numba_cache_of_installed_kernels(workspace):
     # --symlink-install)
     record = (workspace / 'build' / PACKAGE / 'install.log').read_text().splitlines()
     assert any(
-        line.endswith('.nbi') and 'shell_kernels.advance' in line for line in record
+        line.endswith('.nbi') and 'shell.kernels.advance' in line for line in record
     ), 'the numba cache files are not in the install record'
 
 
@@ -255,7 +256,7 @@ def test_installed_sim_node_first_state_from_warm_cache(workspace, scene):
         received
     ), f'no state on /clock from the installed sim_node (scene {scene}):\n{out[-4000:]}'
     site = str(site_packages(workspace) / PACKAGE / 'models' / '__pycache__')
-    module = 'lumped_kernels' if scene == 'pump_cycle' else 'shell_kernels'
+    module = 'lumped.kernels' if scene == 'pump_cycle' else 'shell.kernels'
     loaded = [
         line
         for line in out.splitlines()

@@ -15,7 +15,7 @@ import csv
 import os
 from pathlib import Path
 
-from pulsejet_sim.sweep import load_sweep, open_executor, run_sweep, write_csv
+from pulsejet_sim.studies.sweep import load_sweep, open_executor, run_sweep, write_csv
 import pytest
 
 distributed = pytest.importorskip('distributed')

@@ -11,13 +11,13 @@ import warnings
 import gymnasium as gym
 from gymnasium.utils.env_checker import check_env
 import numpy as np
+from pulsejet_sim.core.model_io import Command, VALVE_MIN_OPENING
+from pulsejet_sim.engine.simulation import Simulation
 import pulsejet_sim.envs as E
 from pulsejet_sim.envs.rewards import REWARDS
-from pulsejet_sim.models import lumped_batch as B
-from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import Command, VALVE_MIN_OPENING
+from pulsejet_sim.models.lumped import batch as B
+from pulsejet_sim.models.lumped import kernels as K
 from pulsejet_sim.scene import load_scene
-from pulsejet_sim.simulation import Simulation
 import pytest
 
 
@@ -129,7 +129,7 @@ def _batch_against_single(
 
     The robots have per-robot stiffness and b(0) and get random commands that seal, throttle and
     open the valve. Returns (batch states, single states, batch done/status, single done/status,
-    component scales). losses_off: the batch kernel runs with lumped_batch.LOSSES_OFF (the loss
+    component scales). losses_off: the batch kernel runs with lumped.batch.LOSSES_OFF (the loss
     components are then compared with their initial values, not the single-robot ones);
     initial_losses: the loss components' value at the start.
     """
@@ -290,7 +290,7 @@ def test_vector_env_matches_single_env_and_autoresets():
 
 
 def test_a_valve_action_below_the_seat_shuts_the_valve_in_both_envs():
-    # the valve cannot hold an opening below its seat (base.VALVE_MIN_OPENING): a command there is
+    # the valve cannot hold an opening below its seat (VALVE_MIN_OPENING): a command there is
     # refused, so an agent's 0.1 % means shut; found by review: the single env raised CommandError
     # and the vector env flipped the valve between the seat and shut at every step
     kw = {'initial_b_jitter': 0.0, 'reward': 'distance'}

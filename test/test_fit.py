@@ -8,10 +8,10 @@ the calibrated robot scene swims as docs/CALIBRATION.md reports. Real runner, no
 
 from pathlib import Path
 
-from pulsejet_sim import fit
 from pulsejet_sim.cli import main as cli_main
-from pulsejet_sim.runner import run_scene
 from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies import fit
+from pulsejet_sim.studies.runner import run_scene
 import pytest
 import yaml
 

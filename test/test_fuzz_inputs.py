@@ -30,9 +30,9 @@ from typing import Any
 
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-from pulsejet_sim.models.base import Command, CommandError, Observation, SimulationBlowUp
+from pulsejet_sim.core.model_io import Command, CommandError, Observation, SimulationBlowUp
+from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.scene import load_scene, load_scene_data, SceneError
-from pulsejet_sim.simulation import Simulation
 import pytest
 import yaml
 
@@ -52,7 +52,7 @@ BASES: dict[str, dict] = {name: load_scene_data(name)[0] for name in BASE_NAMES}
 RUN_STEPS = 40  # physics steps a valid scene is run for (in batches of RUN_BATCH)
 RUN_BATCH = 8
 CLOSURE_TOL = 0.05  # |closure_relative| allowed after a short run (shell: Newton tolerance)
-SAFETY_NET = 'please report'  # scene.py's catch-all: a value the model's own validation missed
+SAFETY_NET = 'please report'  # scene.loader's catch-all: a value the model's own validation missed
 # every lumped terms/options combination compiles its own numba kernel (seconds each): the fast
 # test steps only the bases' combinations; the reliability script sets PULSEJET_FUZZ_ALL_FLAGS=1
 ALL_FLAGS = os.environ.get('PULSEJET_FUZZ_ALL_FLAGS') == '1'
@@ -216,7 +216,7 @@ def _refusal_ok(message: str, mutations: list) -> None:
 
 def run_scene_briefly(scene) -> str:
     """Step a built scene RUN_STEPS steps with its routine's commands; 'ran' or 'fault'."""
-    from pulsejet_ctrl.routines import routine_from_scene
+    from pulsejet_sim.routines import routine_from_scene
 
     sim = Simulation(scene.model)
     _finite_observation(sim.observe(), 'initial state')
@@ -505,7 +505,7 @@ def check_sweep_text(text: str, tmp_dir: Path) -> str:
     'refused' (SweepError / YAML error, what `pulsejet sweep` prints) or 'loaded'; every run of a
     loaded sweep then loads its scene or is refused with SceneError. Anything else raises.
     """
-    from pulsejet_sim.sweep import load_sweep, SweepError
+    from pulsejet_sim.studies.sweep import load_sweep, SweepError
 
     path = tmp_dir / 'fuzz_sweep.yaml'
     path.write_text(text)
@@ -532,7 +532,7 @@ def test_sweep_files_load_or_are_refused(text: str, tmp_path_factory) -> None:
 
 @pytest.mark.parametrize('axis', [1, {'a': 1}, {'a': 'text'}])
 def test_sweep_axis_that_is_not_a_mapping_is_refused(tmp_path: Path, axis: Any) -> None:
-    from pulsejet_sim.sweep import load_sweep, SweepError
+    from pulsejet_sim.studies.sweep import load_sweep, SweepError
 
     data = copy.deepcopy(SWEEP_BASE)
     data['studies']['s']['axes']['k'] = axis

@@ -56,7 +56,7 @@ def values_of(entries) -> list[float]:
 
 @pytest.mark.timeout(150)
 def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
-    from pulsejet_sim import interface as names
+    from pulsejet_sim.core import topics as names
     from pulsejet_sim.ros.harness import SimHarness
     from pulsejet_sim.ros.recorder import Recorder
 
@@ -174,9 +174,9 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
     # commands)
     applied = bag.get('/pulsejet/applied_command')
     assert applied, 'no /pulsejet/applied_command recorded'
+    from pulsejet_sim.engine.simulation import Simulation
     from pulsejet_sim.ros.messages import command_from_applied
     from pulsejet_sim.scene import load_scene
-    from pulsejet_sim.simulation import Simulation
 
     changes = sorted((command_from_applied(m) for _, m in applied), key=lambda tc: tc[0])  # stable
     replay = Simulation(load_scene('pump_cycle').model)
@@ -193,7 +193,7 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
     recorded_u = velocity[np.argmax(velocity[:, 0]), 1]
     recorded_v = vol[-1]
     # every recorded state, not only the last: a divergence is named with its time
-    from pulsejet_sim.resim import resimulate
+    from pulsejet_sim.studies.resim import resimulate
 
     every_state = resimulate(mcap, scene='pump_cycle')
     assert every_state.bit_identical, every_state.format_table()

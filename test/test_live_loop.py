@@ -12,8 +12,8 @@ import time
 
 from pulsejet_sim.engine import session as eng
 from pulsejet_sim.engine.live_loop import LiveLoop
+from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.scene import load_scene
-from pulsejet_sim.simulation import Simulation
 import pytest
 
 CONTROL_PERIOD_S = 0.05

@@ -5,11 +5,11 @@ The adaptive integrator: Dormand-Prince 5(4), dense output.
 """
 
 import numpy as np
-from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import Command, VALVE_MIN_OPENING
-from pulsejet_sim.runner import run_scene
+from pulsejet_sim.core.model_io import Command, VALVE_MIN_OPENING
+from pulsejet_sim.engine.simulation import Simulation
+from pulsejet_sim.models.lumped import kernels as K
 from pulsejet_sim.scene import load_scene, SceneError
-from pulsejet_sim.simulation import Simulation
+from pulsejet_sim.studies.runner import run_scene
 import pytest
 
 ADAPTIVE = {'simulation': {'integrator': 'adaptive', 'rtol': 1e-8, 'atol': 1e-11}}
@@ -82,7 +82,7 @@ def test_a_closing_valve_seals_at_its_seat_instead_of_faulting(overrides):
     Found by the live fuzz: from 0.50001 the fixed-step stroke (2e-3 per step) left the valve at
     1e-5 for one step, where the orifice loss made the nozzle flow too stiff and the model faulted
     (20 of 21 runs of benchmarks/valve_seat_probe.py). The valve's opening is always 0 or at least
-    its seat (base.VALVE_MIN_OPENING): a closing valve seals when its stroke would pass below the
+    its seat (VALVE_MIN_OPENING): a closing valve seals when its stroke would pass below the
     seat, a shut one cracks open to it.
     """
     model = load_scene('pump_cycle', overrides).model

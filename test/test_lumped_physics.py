@@ -5,12 +5,12 @@ import math
 from pathlib import Path
 
 import numpy as np
-from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import Command
-from pulsejet_sim.models.lumped import TERM_BITS
-from pulsejet_sim.models.lumped_figures import section41_figures
+from pulsejet_sim.core.model_io import Command
+from pulsejet_sim.engine.simulation import Simulation
+from pulsejet_sim.models.lumped import kernels as K
+from pulsejet_sim.models.lumped.model import TERM_BITS
 from pulsejet_sim.scene import load_scene, SceneError
-from pulsejet_sim.simulation import Simulation
+from pulsejet_sim.studies.section41 import section41_figures
 import pytest
 
 B0 = 0.036
@@ -65,7 +65,7 @@ def test_energy_ledger_closes_in_the_consistent_model():
 
 def test_energy_ledger_closes_with_pump_and_valve_events():
     sim, _ = run('pump_cycle', duration_s=12.0)
-    from pulsejet_ctrl.routines import PumpValveRoutine
+    from pulsejet_sim.routines import PumpValveRoutine
 
     # drive it with the routine as the runner does
     sc = load_scene('pump_cycle')
@@ -126,7 +126,7 @@ def ledger_closure_from_keys(ledger):
 
 @pytest.mark.parametrize('coupling', ['consistent', 'paper'])
 def test_ledger_keys_add_up_to_the_closure(coupling):
-    from pulsejet_ctrl.routines import PumpValveRoutine
+    from pulsejet_sim.routines import PumpValveRoutine
 
     sc = load_scene('pump_cycle', {'options': {'coupling': coupling}})
     sim = Simulation(sc.model)
@@ -197,7 +197,7 @@ def test_closure_error_shrinks_at_the_integrator_order(coupling, duration_s):
 
 
 # ---- paper 001, section 4.1: each figure the paper reports, as a check --------------------------
-# Figures and definitions: pulsejet_sim/models/lumped_figures.py; table and discussion:
+# Figures and definitions: pulsejet_sim/studies/section41.py; table and discussion:
 # docs/PHYSICS_LUMPED.md; every reading of the lost text: benchmarks/results/paper001_section41.md.
 # A claim the model reproduces is asserted with a stated tolerance; a claim it does not reproduce
 # is asserted as what the model does, with the measured number in the message.
@@ -433,7 +433,7 @@ def test_reading_g_section_4_1(section41_shell_nozzle):
 
 
 def test_reading_g_is_refused_by_the_batch_kernel():
-    from pulsejet_sim.models import lumped_batch as B
+    from pulsejet_sim.models.lumped import batch as B
 
     model = load_scene('escape', SHELL_NOZZLE).model
     with pytest.raises(ValueError, match="nozzle_section: 'shell'"):
@@ -594,7 +594,7 @@ def test_blow_up_stops_at_the_last_good_state_and_says_why():
     # paper 001's equations as written run away on the section 4.1 case: the shell collapses
     sc = load_scene('escape', {'options': {'coupling': 'paper'}})
     sim = Simulation(sc.model)
-    from pulsejet_sim.models.base import SimulationBlowUp
+    from pulsejet_sim.core.model_io import SimulationBlowUp
 
     with pytest.raises(SimulationBlowUp) as err:
         for _ in range(1000):

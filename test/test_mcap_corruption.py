@@ -20,10 +20,11 @@ import random
 
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-from pulsejet_sim import analysis, resim
+from pulsejet_sim import analysis
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, iter_bag
 from pulsejet_sim.bag.writer import BagWriter
 from pulsejet_sim.ros import replay
+from pulsejet_sim.studies import resim
 import pytest
 
 EXAMPLES = int(os.environ.get('PULSEJET_FUZZ_EXAMPLES', '40'))
@@ -37,8 +38,8 @@ CHUNK_BYTES = 2048
 
 def make_recording(path: Path, duration_s: float = 0.3) -> Path:
     """Make an offline run of `escape` (scene stored in the file), chunked every CHUNK_BYTES."""
-    from pulsejet_sim.runner import run_scene
     from pulsejet_sim.scene import load_scene
+    from pulsejet_sim.studies.runner import run_scene
 
     defaults = BagWriter.__init__.__kwdefaults__
     old = defaults['chunk_size_bytes']

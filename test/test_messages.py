@@ -1,6 +1,6 @@
 """Messages of pulsejet_sim.ros.messages: the atomic command, the mantle Marker from arrays."""
 
-from pulsejet_sim.models.base import Command
+from pulsejet_sim.core.model_io import Command
 from pulsejet_sim.ros import messages
 import pytest
 

@@ -301,8 +301,8 @@ def test_a_double_given_as_a_word_is_refused_naming_the_range(domain):
 @pytest.mark.timeout(150)
 def test_replay_and_recorder_describe_their_parameters(domain, client, tmp_path):
     from pulsejet_sim.ros import recorder, replay
-    from pulsejet_sim.runner import run_scene
     from pulsejet_sim.scene import load_scene
+    from pulsejet_sim.studies.runner import run_scene
 
     bag = tmp_path / 'escape.mcap'
     run_scene(load_scene('escape'), 0.1, bag)

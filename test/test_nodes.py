@@ -234,7 +234,7 @@ def volume_series(probe, since_wall):
 
 @pytest.mark.timeout(120)
 def test_bad_commands_rejected_good_ones_applied(tmp_path):
-    from pulsejet_sim.models.base import Command
+    from pulsejet_sim.core.model_io import Command
     from pulsejet_sim.ros.harness import SimHarness
 
     with SimHarness(

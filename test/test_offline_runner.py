@@ -6,8 +6,8 @@ import subprocess
 import sys
 
 import numpy as np
-from pulsejet_sim.runner import run_scene
 from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.runner import run_scene
 import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores

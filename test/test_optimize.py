@@ -14,14 +14,14 @@ import math
 from pathlib import Path
 
 import numpy as np
-from pulsejet_sim.optimize import (
+from pulsejet_sim.studies.optimize import (
     differential_evolution,
     load_optimize,
     OptimizeError,
     run_optimize,
     write_results,
 )
-from pulsejet_sim.sweep import open_executor, run_one, RunSpec
+from pulsejet_sim.studies.sweep import open_executor, run_one, RunSpec
 import pytest
 import yaml
 

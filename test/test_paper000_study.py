@@ -12,7 +12,7 @@ from pathlib import Path
 import sys
 
 from pulsejet_sim.scene import load_scene
-from pulsejet_sim.sweep import load_sweep, run_one
+from pulsejet_sim.studies.sweep import load_sweep, run_one
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -36,7 +36,7 @@ RERUN = ('internal/paper/cone/E80k/T0.66', 'external/consistent/ellipsoid/E80k/T
 
 # Bit for bit on CPUs with and without AVX-512. On 2026-12-02 (AMD EPYC, AVX-512) one case came out
 # 3-4 ulp off: numpy ran np.arctan2 of the reference geometry through its AVX-512 kernels, whose
-# last bits differ from the C library's that the table's host used; shell_geometry now takes the C
+# last bits differ from the C library's that the table's host used; shell.geometry now takes the C
 # library's atan2 (the numba kernels do already), and the rerun matches on both of numpy's paths
 # (NPY_DISABLE_CPU_FEATURES=X86_V4 AVX512_ICL AVX512_SPR gives the same bits; test_portable_bits).
 

@@ -28,8 +28,8 @@ AVX512_TARGETS = [t for t in ('X86_V4', 'AVX512_ICL', 'AVX512_SPR') if t in __cp
 
 CHILD = r"""
 import hashlib, json, sys
+from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.scene import load_scene
-from pulsejet_sim.simulation import Simulation
 
 out = {}
 for name in sys.argv[1:]:

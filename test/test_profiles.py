@@ -12,13 +12,15 @@ import shutil
 
 import numpy as np
 from PIL import Image
-from pulsejet_sim import analysis, cli, profiles
+from pulsejet_sim import analysis, cli
+from pulsejet_sim.analysis import profiles
 from pulsejet_sim.bag.reader import BagInfo, load_series
 from pulsejet_sim.bag.writer import BagWriter
-from pulsejet_sim.models.base import Command
+from pulsejet_sim.core.model_io import Command
 from pulsejet_sim.ros import messages
-from pulsejet_sim.runner import run_scene
+from pulsejet_sim.ros.bag_messages import write_message
 from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.runner import run_scene
 import pytest
 
 SHELL_S = 0.7  # shell_robot pulls at 1.6 Hz: 0.7 s holds the whole cycle [0, 0.625] s
@@ -156,7 +158,7 @@ def test_animate_refuses_bad_input(
     bare = tmp_path / 'no_profiles.mcap'
     with BagWriter(bare) as bag:
         for topic, msg in messages.command_messages(Command()):
-            bag.write_message(topic, msg, 0)
+            write_message(bag, topic, msg, 0)
     assert profiles.main_animate([str(bare)]) == 2
     err = capsys.readouterr().err
     assert repr(str(bare)) in err and 'holds no pulsejet/mantle_profile' in err

@@ -13,7 +13,7 @@ import subprocess
 import sys
 import time
 
-from pulsejet_sim.models.base import Command, Observation
+from pulsejet_sim.core.model_io import Command, Observation
 from pulsejet_sim.ros import messages
 from pulsejet_sim.ros.recorder import parse_topics, Recorder
 import pytest

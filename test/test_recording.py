@@ -14,9 +14,9 @@ import types
 import numpy as np
 from pulsejet_sim.bag import cdr, writer as bag_writer
 from pulsejet_sim.bag.reader import bag_info, read_bag
-from pulsejet_sim.interface import TOPIC_TYPES
-from pulsejet_sim.runner import Drive, run_scene
+from pulsejet_sim.core.topics import TOPIC_TYPES
 from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.runner import Drive, run_scene
 import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores

@@ -25,8 +25,8 @@ from pulsejet_sim.ros.replay import (
     load_recording,
     passes_phrase,
 )
-from pulsejet_sim.runner import run_scene
 from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.runner import run_scene
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor

@@ -11,15 +11,15 @@ from pathlib import Path
 from typing import Callable
 
 from pulsejet_sim.bag import BagInfo, BagWriter, iter_bag
-from pulsejet_sim.resim import (
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.resim import (
     main_resim,
     read_applied_commands,
     read_recorded_states,
     ResimError,
     resimulate,
 )
-from pulsejet_sim.runner import run_scene
-from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.runner import run_scene
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState

@@ -1,7 +1,7 @@
 """The pump/valve routine is a pure state machine: same inputs, same commands."""
 
-from pulsejet_ctrl.routines import PumpValveRoutine
-from pulsejet_sim.models.base import ModelError
+from pulsejet_sim.core.model_io import ModelError
+from pulsejet_sim.routines import PumpValveRoutine
 import pytest
 
 
@@ -47,7 +47,7 @@ def test_bad_routine_config_names_the_key():
 
 
 def test_cable_routine_pulls_with_half_cosines_and_rests():
-    from pulsejet_ctrl.routines import CableRoutine, routine_from_scene
+    from pulsejet_sim.routines import CableRoutine, routine_from_scene
 
     r = routine_from_scene(
         {

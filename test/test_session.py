@@ -7,10 +7,10 @@ closed-loop lockstep, duration, faults, health. No DDS.
 
 import math
 
+from pulsejet_sim.core.model_io import CommandError
 from pulsejet_sim.engine import session as eng
-from pulsejet_sim.models.base import CommandError
+from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.scene import load_scene
-from pulsejet_sim.simulation import Simulation
 import pytest
 
 

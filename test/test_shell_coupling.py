@@ -8,9 +8,9 @@ the functions: what each option does, its ledger, and its refusals.
 import math
 
 import numpy as np
-from pulsejet_sim.models import shell_kernels as sk
-from pulsejet_sim.models.base import Command, ModelError
-from pulsejet_sim.models.shell import ShellModel
+from pulsejet_sim.core.model_io import Command, ModelError
+from pulsejet_sim.models.shell import kernels as sk
+from pulsejet_sim.models.shell.model import ShellModel
 import pytest
 
 

@@ -3,8 +3,8 @@
 import pathlib
 
 import numpy as np
-from pulsejet_sim.models.base import Command
-from pulsejet_sim.models.shell import ShellModel
+from pulsejet_sim.core.model_io import Command
+from pulsejet_sim.models.shell.model import ShellModel
 import pytest
 import yaml
 

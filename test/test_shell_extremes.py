@@ -10,8 +10,8 @@ import math
 import pathlib
 
 import numpy as np
-from pulsejet_sim.models.base import Command, ModelError, SimulationBlowUp
-from pulsejet_sim.models.shell import ShellModel
+from pulsejet_sim.core.model_io import Command, ModelError, SimulationBlowUp
+from pulsejet_sim.models.shell.model import ShellModel
 import pytest
 import yaml
 
@@ -126,7 +126,7 @@ def test_explicit_scheme_at_its_stable_step_runs_and_beyond_blows_up_cleanly():
     ok.advance(state, 0.0, int(0.03 / ok.dt_s), Command())
     assert np.all(np.isfinite(state))
     # force a step beyond the bound (bypassing the refusal) -> SimulationBlowUp, state kept finite
-    import pulsejet_sim.models.shell_kernels as sk
+    import pulsejet_sim.models.shell.kernels as sk
 
     ok.dt_s = 2.0 * bound
     ok.P[sk.P_DT] = 2.0 * bound
@@ -207,9 +207,9 @@ CABLE_SCENES = sorted(
 @pytest.mark.parametrize('name', CABLE_SCENES)
 def test_cable_commands_up_to_the_rating_never_blow_a_shipped_scene_up(name):
     """Hold, and toggle every step and every 10 steps, at the cable's rating: the physics runs."""
-    from pulsejet_sim.models.base import CommandError
+    from pulsejet_sim.core.model_io import CommandError
+    from pulsejet_sim.engine.simulation import Simulation
     from pulsejet_sim.scene import load_scene
-    from pulsejet_sim.simulation import Simulation
 
     model = load_scene(name, command_driven=True).model
     low, rating = Simulation(model).command_limits['cable_force_n']

@@ -10,10 +10,10 @@ import math
 import re
 
 import numpy as np
-from pulsejet_sim.models import shell_kernels as sk
-from pulsejet_sim.models.base import Command, ModelError, SimulationBlowUp
-from pulsejet_sim.models.shell import ShellModel
-from pulsejet_sim.models.shell_geometry import build_profile
+from pulsejet_sim.core.model_io import Command, ModelError, SimulationBlowUp
+from pulsejet_sim.models.shell import kernels as sk
+from pulsejet_sim.models.shell.geometry import build_profile
+from pulsejet_sim.models.shell.model import ShellModel
 import pytest
 from scipy.integrate import quad
 from test_shell_coupling import cone_scene, run
@@ -56,7 +56,7 @@ def test_inertance_of_the_ellipsoid_is_paper_001s_internal_flow():
 
 
 def test_inertance_of_the_current_shape_and_its_gradient():
-    """shell_kernels.inertance: the reference mesh's Lambda, and an exact gradient."""
+    """shell.kernels.inertance: the reference mesh's Lambda, and an exact gradient."""
     scene = cone_scene('paper', 1e-3)
     scene['fluid']['internal_inertia'] = 'one_dimensional_deforming'
     model = ShellModel.from_scene(scene)

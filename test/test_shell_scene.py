@@ -5,9 +5,9 @@ import math
 import pathlib
 
 import numpy as np
-from pulsejet_sim.models.base import Command, ModelError, Observation
-from pulsejet_sim.models.shell import ShellModel
-from pulsejet_sim.models.shell_geometry import build_profile
+from pulsejet_sim.core.model_io import Command, ModelError, Observation
+from pulsejet_sim.models.shell.geometry import build_profile
+from pulsejet_sim.models.shell.model import ShellModel
 import pytest
 import yaml
 
@@ -156,7 +156,7 @@ def test_observation_profile_and_routine_command():
 @pytest.mark.parametrize('pulse', ['half_cosine', 'triangle'])
 def test_built_in_routine_and_the_controllers_cable_routine_pull_alike(pulse):
     """The model's routine (numba) and pulsejet_ctrl's CableRoutine give the same pull."""
-    from pulsejet_ctrl.routines import CableRoutine
+    from pulsejet_sim.routines import CableRoutine
 
     model = ShellModel.from_scene(scene(actuation__pulse=pulse, actuation__start_delay_s=0.05))
     act = model.actuation
@@ -213,8 +213,8 @@ def test_reference_state_is_an_exact_equilibrium():
 
 
 def test_points_profile_runs_through_the_scene_loader():
+    from pulsejet_sim.engine.simulation import Simulation
     from pulsejet_sim.scene import scene_from_dict
-    from pulsejet_sim.simulation import Simulation
 
     sc = scene(geometry__kind='points')
     sc['geometry'] = {

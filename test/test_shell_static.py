@@ -9,8 +9,8 @@ sphere ``w = p R^2 (1 - nu) / (2 E t)``; long closed cylinder ``w = p R^2 (1 - n
 import math
 
 import numpy as np
-from pulsejet_sim.models.base import Command
-from pulsejet_sim.models.shell import ShellModel
+from pulsejet_sim.core.model_io import Command
+from pulsejet_sim.models.shell.model import ShellModel
 import pytest
 
 E_PA = 40e3

@@ -17,7 +17,7 @@ import time
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
-from pulsejet_sim.models.base import Command  # noqa: E402, I100
+from pulsejet_sim.core.model_io import Command  # noqa: E402, I100
 from pulsejet_sim.ros.harness import HarnessError, SimHarness  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 

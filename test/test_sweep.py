@@ -5,7 +5,7 @@ import csv
 import subprocess
 import sys
 
-from pulsejet_sim.sweep import load_sweep, run_sweep, SweepError, write_csv
+from pulsejet_sim.studies.sweep import load_sweep, run_sweep, SweepError, write_csv
 import pytest
 
 SWEEP = """

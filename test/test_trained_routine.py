@@ -20,9 +20,9 @@ import pytest
 import yaml
 
 rclpy = pytest.importorskip('rclpy')
-from pulsejet_ctrl.routines import PumpValveRoutine  # noqa: E402, I100
-from pulsejet_sim.optimize import routine_run  # noqa: E402
-from pulsejet_sim.resim import read_applied_commands  # noqa: E402
+from pulsejet_sim.routines import PumpValveRoutine  # noqa: E402, I100
+from pulsejet_sim.studies.optimize import routine_run  # noqa: E402
+from pulsejet_sim.studies.resim import read_applied_commands  # noqa: E402
 from rosbags.highlevel import AnyReader  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent.parent / 'examples' / 'results'

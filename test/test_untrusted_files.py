@@ -12,14 +12,15 @@ import contextlib
 import io
 from pathlib import Path
 
-from pulsejet_sim import analysis, resim
+from pulsejet_sim import analysis
 from pulsejet_sim.bag import writer as bag_writer
 from pulsejet_sim.bag.reader import bag_info, BagInfo, BagReadError, iter_bag
 from pulsejet_sim.bag.repair import repair_file
 from pulsejet_sim.bag.writer import BagWriter
-from pulsejet_sim.models.schema import MAX_YAML_BYTES, safe_load_yaml, YAMLInputError
+from pulsejet_sim.core.schema import MAX_YAML_BYTES, safe_load_yaml, YAMLInputError
 from pulsejet_sim.ros import replay
 from pulsejet_sim.scene import load_scene, load_scene_data, SceneError
+from pulsejet_sim.studies import resim
 import pytest
 import yaml
 
@@ -97,8 +98,8 @@ def test_long_bad_values_are_shortened_in_messages(tmp_path: Path) -> None:
 
 
 def test_sweep_and_fit_files_use_the_safe_loader(tmp_path: Path) -> None:
-    from pulsejet_sim.fit import FitError, load_fit
-    from pulsejet_sim.sweep import load_sweep, SweepError
+    from pulsejet_sim.studies.fit import FitError, load_fit
+    from pulsejet_sim.studies.sweep import load_sweep, SweepError
 
     marker = tmp_path / 'executed'
     evil = tmp_path / 'evil.yaml'
@@ -113,7 +114,7 @@ def test_sweep_and_fit_files_use_the_safe_loader(tmp_path: Path) -> None:
 # ---- recordings ---------------------------------------------------------------------------------
 @pytest.fixture(scope='module')
 def run_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from pulsejet_sim.runner import run_scene
+    from pulsejet_sim.studies.runner import run_scene
 
     path = tmp_path_factory.mktemp('untrusted') / 'run.mcap'
     run_scene(load_scene('escape'), 0.05, path)
@@ -199,7 +200,7 @@ def test_newer_format_version_is_refused_clearly(newer_format: Path) -> None:
 
 
 def test_current_files_carry_the_format_version(run_file: Path) -> None:
-    from pulsejet_sim.bag.reader import FORMAT_VERSION, format_version
+    from pulsejet_sim.bag.records import FORMAT_VERSION, format_version
 
     info = BagInfo(run_file)
     list(iter_bag(run_file, info=info, decode=False))

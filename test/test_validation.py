@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import math
 
-from pulsejet_sim import validation
+from pulsejet_sim.studies import validation
 import pytest
 
 # the smallest case (lumped, one deflation): its stored row is what the model does today,

@@ -11,14 +11,13 @@ from pulsejet_sim.bag.reader import (
     BagMessage,
     BagReadError,
     find_topic,
-    FORMAT_VERSION,
     iter_bag,
     load_series,
     read_bag,
     read_metadata,
-    repair,
 )
-from pulsejet_sim.bag.repair import repair_file, RepairResult
+from pulsejet_sim.bag.records import FORMAT_VERSION
+from pulsejet_sim.bag.repair import repair, repair_file, RepairResult
 from pulsejet_sim.bag.writer import BagError, BagWriter, install_signal_handlers, qos_profiles_yaml
 
 __all__ = [

@@ -15,7 +15,7 @@ Padding is written as zeros (rclpy's Fast-CDR leaves padding bytes as they were 
 other byte is the one `rclpy.serialization.serialize_message` writes for the equivalent message
 (test_cdr.py compares them field by field).
 
-No ROS import: frame ids, topic names and thresholds come from pulsejet_sim.interface.
+No ROS import: frame ids, topic names and thresholds come from pulsejet_sim.core.topics.
 """
 
 from __future__ import annotations
@@ -25,7 +25,8 @@ import struct
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
-from pulsejet_sim.interface import (
+from pulsejet_sim.core.model_io import Command, Observation
+from pulsejet_sim.core.topics import (
     APPLIED_COMMAND_NAMES,
     BASE_FRAME_ID,
     COMMAND_FIELDS,
@@ -47,7 +48,6 @@ from pulsejet_sim.interface import (
     TOPIC_VELOCITY,
     TOPIC_VOLUME,
 )
-from pulsejet_sim.models.base import Command, Observation
 
 ENCAPSULATION = b'\x00\x01\x00\x00'  # CDR, little endian, no options
 # diagnostic_msgs/DiagnosticStatus levels (byte constants of the .msg)

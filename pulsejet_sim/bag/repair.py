@@ -22,13 +22,10 @@ from dataclasses import dataclass
 from pathlib import Path
 import sys
 from typing import Sequence
+import warnings
 
-from pulsejet_sim.bag.reader import (
-    _check_header,
-    _open_checked,
-    _records,
-    BagInfo,
-    BagReadError,
+from pulsejet_sim.bag.records import (
+    BagInfo, BagReadError, check_header, iter_records, open_checked
 )
 
 
@@ -83,7 +80,7 @@ def repair_file(
         raise BagReadError(
             f'repair output {str(out)!r} exists; allowed: a new path (or --force to replace it)'
         )
-    p, fh = _open_checked(src)
+    p, fh = open_checked(src)
     info = BagInfo(p)
     schemas: dict[int, Schema] = {}
     channels: dict[int, str] = {}  # channel id -> topic as stored in the source
@@ -92,9 +89,9 @@ def repair_file(
     tmp = out.with_name(out.name + '.partial')
     bag: BagWriter | None = None
     try:
-        for record in _records(fh, info):
+        for record in iter_records(fh, info):
             if isinstance(record, Header):
-                _check_header(record, info, p, repairing=True)
+                check_header(record, info, p, repairing=True)
                 bag = BagWriter(tmp)
                 continue
             if bag is None:  # the header record was damaged (the reader skipped it): keep the data
@@ -196,3 +193,11 @@ def main_repair(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == '__main__':
     sys.exit(main_repair())
+
+
+def repair(path: str | Path, out_path: str | Path | None = None) -> Path:
+    """Rewrite a damaged recording into a complete one; see repair_file."""
+    result = repair_file(path, out_path, overwrite=True)
+    if not result.source.damaged:
+        warnings.warn(f'{str(path)!r} was already complete; rewrote it anyway', stacklevel=2)
+    return result.out_path

@@ -20,7 +20,8 @@ refuses a recording of a newer format with a clear message (bag.reader.FORMAT_VE
 
 Topic names are stored fully qualified like rosbag2 ('pulsejet/velocity' -> '/pulsejet/velocity').
 
-Two ways in: write()/write_message() per message (the ROS recorder, with rclpy's bytes), and
+Two ways in: write() per message (the ROS recorder, with rclpy's bytes; ros.bag_messages for
+rclpy message objects), and
 write_records() for batches of bag.cdr bytes (the offline tools, no rclpy), which writes the same
 file faster.
 """
@@ -44,7 +45,7 @@ import weakref
 from mcap.records import MessageIndex
 from mcap.writer import CompressionType, Writer
 from pulsejet_sim.bag import msgdefs
-from pulsejet_sim.bag.reader import FORMAT_VERSION
+from pulsejet_sim.bag.records import FORMAT_VERSION
 import yaml
 
 LIBRARY = f'pulsejet_sim.bag pulsejet-format={FORMAT_VERSION} (rosbag2_storage_mcap layout)'
@@ -73,7 +74,7 @@ def qualify_topic(topic: str) -> str:
 
 
 def _topic_type(topic: str) -> str:
-    from pulsejet_sim.interface import TOPIC_TYPES
+    from pulsejet_sim.core.topics import TOPIC_TYPES
 
     try:
         return TOPIC_TYPES[topic]
@@ -82,14 +83,6 @@ def _topic_type(topic: str) -> str:
             f'topic {topic!r} is not a pulsejet topic; allowed: {sorted(TOPIC_TYPES)} (or '
             'add_topic it first)'
         ) from None
-
-
-def type_name_of(msg: Any) -> str:
-    """'pkg/msg/Type' of an rclpy message instance (from its Python module path)."""
-    module = type(msg).__module__.split('.')  # e.g. std_msgs.msg._float64
-    if len(module) < 2:
-        raise BagError(f'{type(msg).__name__} is not a generated ROS message class')
-    return f'{module[0]}/{module[1]}/{type(msg).__name__}'
 
 
 class BagWriter:
@@ -352,21 +345,6 @@ class BagWriter:
         of cutting the record in half.
         """
         return _Mutating(self)
-
-    def write_message(self, topic: str, msg: Any, log_time_ns: int) -> None:
-        """
-        Serialize an rclpy message and write it.
-
-        The topic is added with the message's type if new.
-        """
-        from rclpy.serialization import (  # rclpy only where rclpy messages are used
-            serialize_message,
-        )
-
-        name = qualify_topic(topic)
-        if name not in self._channels:
-            self.add_topic(name, type_name_of(msg))
-        self.write(name, serialize_message(msg), log_time_ns)
 
     def add_attachment(
         self,

@@ -21,8 +21,8 @@ import time
 import traceback
 from typing import Callable, Iterator, Mapping, Optional
 
+from pulsejet_sim.core.model_io import CommandError
 from pulsejet_sim.engine.session import Session
-from pulsejet_sim.models.base import CommandError
 
 Events = list
 #: the pacing thread joins within this time at close (a batch in progress finishes first)

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 import math
 from typing import Optional
 
-from pulsejet_sim.interface import SERVICE_PAUSE, SERVICE_RESET, SERVICE_STEP
-from pulsejet_sim.models.base import check_command_value, Command, CommandError, SimulationBlowUp
+from pulsejet_sim.core.model_io import check_command_value, Command, CommandError, SimulationBlowUp
+from pulsejet_sim.core.topics import SERVICE_PAUSE, SERVICE_RESET, SERVICE_STEP
 
 PACING_MODES = ('real_time', 'as_fast_as_possible', 'lockstep', 'closed_loop')
 WATCHDOG_ACTIONS = ('safe', 'hold')

@@ -27,11 +27,11 @@ from typing import Any
 import gymnasium as gym
 from gymnasium import spaces
 import numpy as np
+from pulsejet_sim.core.model_io import Command, SimulationBlowUp, VALVE_MIN_OPENING
+from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.envs import rewards as R
-from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import Command, SimulationBlowUp, VALVE_MIN_OPENING
+from pulsejet_sim.models.lumped import kernels as K
 from pulsejet_sim.scene import load_scene
-from pulsejet_sim.simulation import Simulation
 
 OBS_NAMES = (
     'speed_m_s',
@@ -71,7 +71,7 @@ def clip_actions(actions: np.ndarray, space: spaces.Box) -> np.ndarray:
     """
     Return actions (..., 2) inside the Box, NaN as 0; a valve opening below the seat shuts it.
 
-    A command refuses an opening between 0 and the valve's seat (base.VALVE_MIN_OPENING), where the
+    A command refuses an opening between 0 and the valve's seat (VALVE_MIN_OPENING), where the
     lumped model cannot hold the flow; an agent's action there means "nearly shut", so it is shut.
     """
     act = np.clip(np.nan_to_num(actions, nan=0.0), space.low, space.high)

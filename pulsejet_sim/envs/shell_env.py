@@ -28,12 +28,12 @@ from typing import Any
 import gymnasium as gym
 from gymnasium import spaces
 import numpy as np
+from pulsejet_sim.core.model_io import Command, SimulationBlowUp
+from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.envs import rewards as R
 from pulsejet_sim.envs.lumped_env import episode_periods, steps_per_period
-from pulsejet_sim.models import shell_kernels as sk
-from pulsejet_sim.models.base import Command, SimulationBlowUp
+from pulsejet_sim.models.shell import kernels as sk
 from pulsejet_sim.scene import load_scene
-from pulsejet_sim.simulation import Simulation
 
 OBS_NAMES = (
     'speed_m_s',

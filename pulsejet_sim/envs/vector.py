@@ -1,22 +1,22 @@
 """
 N lumped robots as one gymnasium vector environment, advanced by one numba call per control period.
 
-The call is ``lumped_batch.advance_batch_fast`` (or ``advance_batch_exact``): the single-robot
+The call is ``lumped.batch.advance_batch_fast`` (or ``advance_batch_exact``): the single-robot
 RK4 step and right-hand side, vectorised over blocks of robots, no Python object per robot.
 
 Spaces, actions, observations, rewards and faults are those of ``LumpedPumpValveEnv``, batched:
 actions (N, 2), observations (N, 6), rewards, terminations and truncations (N,). All robots share
 one scene's parameters (``params`` may give one row per robot instead, shape
-(N, lumped_kernels.NP)). ``exact``: False (default) uses the vectorised atanh of Lamb's added mass
+(N, lumped.kernels.NP)). ``exact``: False (default) uses the vectorised atanh of Lamb's added mass
 and LLVM's reciprocal and fused multiply-add rewrites (each about an ulp; trajectories agree with
 LumpedPumpValveEnv to 1e-12 of each component's scale), True libm's (bit for bit
 LumpedPumpValveEnv, tested; 35-42 % fewer robot-steps/s than the default, with losses=True).
 ``losses``: False (default) integrates the state and the pump's work only (``info`` and the
-rewards need no more; ``lumped_batch.LOSSES_OFF``, 14-28 % more robot-steps/s), True also the
-energy ledger's losses in ``env.Y`` (lumped_kernels.Y_E_JET..Y_C_RAM; they stay 0 otherwise).
+rewards need no more; ``lumped.batch.LOSSES_OFF``, 14-28 % more robot-steps/s), True also the
+energy ledger's losses in ``env.Y`` (lumped.kernels.Y_E_JET..Y_C_RAM; they stay 0 otherwise).
 Autoreset: gymnasium's ``NEXT_STEP`` mode: the step after a robot's episode ended resets that robot
 (its action is ignored, reward 0); ``info['fault']`` holds the robots' fault codes
-(lumped_kernels.ERR_*, 0: none). Only the fixed-step RK4 integrator (the scene's ``dt_s``) runs in
+(lumped.kernels.ERR_*, 0: none). Only the fixed-step RK4 integrator (the scene's ``dt_s``) runs in
 batch.
 """
 
@@ -39,8 +39,8 @@ from pulsejet_sim.envs.lumped_env import (
     lumped_spaces,
     steps_per_period,
 )
-from pulsejet_sim.models import lumped_batch as B
-from pulsejet_sim.models import lumped_kernels as K
+from pulsejet_sim.models.lumped import batch as B
+from pulsejet_sim.models.lumped import kernels as K
 from pulsejet_sim.scene import load_scene
 
 

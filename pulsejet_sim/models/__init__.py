@@ -4,17 +4,17 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-from pulsejet_sim.models.base import ModelError
+from pulsejet_sim.core.model_io import ModelError
 
 
 def _lumped(data):
-    from pulsejet_sim.models.lumped import LumpedModel
+    from pulsejet_sim.models.lumped.model import LumpedModel
 
     return LumpedModel.from_scene(data)
 
 
 def _shell(data):
-    from pulsejet_sim.models.shell import ShellModel
+    from pulsejet_sim.models.shell.model import ShellModel
 
     return ShellModel.from_scene(data)
 

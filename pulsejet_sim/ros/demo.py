@@ -20,7 +20,7 @@ import subprocess
 import sys
 import time
 
-from pulsejet_sim.interface import TOPIC_CLOCK
+from pulsejet_sim.core.topics import TOPIC_CLOCK
 from pulsejet_sim.ros.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 

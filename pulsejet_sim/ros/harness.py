@@ -43,7 +43,7 @@ import tempfile
 import time
 from typing import Any, Callable
 
-from pulsejet_sim import interface as names
+from pulsejet_sim.core import topics as names
 from pulsejet_sim.ros.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 

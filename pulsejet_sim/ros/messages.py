@@ -16,7 +16,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Point32, PolygonStamped, TwistStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 import numpy as np
-from pulsejet_sim.interface import (  # noqa: F401  (re-exported: the names of every message)
+from pulsejet_sim.core.model_io import Command, Observation
+from pulsejet_sim.core.topics import (  # noqa: F401  (re-exported: the names of every message)
     APPLIED_COMMAND_NAMES,
     BASE_FRAME_ID,
     COMMAND_FIELDS,
@@ -50,7 +51,6 @@ from pulsejet_sim.interface import (  # noqa: F401  (re-exported: the names of e
     TOPIC_VELOCITY,
     TOPIC_VOLUME,
 )
-from pulsejet_sim.models.base import Command, Observation
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState

@@ -347,7 +347,7 @@ def is_command_topic(topic: str) -> bool:
 
     Those are replayed only on request.
     """
-    from pulsejet_sim.interface import COMMAND_TOPICS, TOPIC_CMD_COMMAND
+    from pulsejet_sim.core.topics import COMMAND_TOPICS, TOPIC_CMD_COMMAND
 
     return any(topic.endswith('/' + name) for name in COMMAND_TOPICS + (TOPIC_CMD_COMMAND,))
 

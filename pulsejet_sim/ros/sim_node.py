@@ -7,7 +7,7 @@ publish.
 Parameters: `pulsejet_sim.ros.sim_node_params` (`ros2 param describe /sim_node <name>` shows
 them).
 
-Topic, service and status names: `pulsejet_sim.interface` (one place for every name). Commands
+Topic, service and status names: `pulsejet_sim.core.topics` (one place for every name). Commands
 arrive per actuator (std_msgs/Float64) or atomically on pulsejet/cmd/command
 (sensor_msgs/JointState, every named actuator at the same step); subscriptions are best effort, so
 reliable and best-effort publishers both connect. A non-finite or out-of-range value is rejected
@@ -27,10 +27,10 @@ import signal
 import sys
 import time
 
+from pulsejet_sim.core.model_io import SimulationBlowUp
 from pulsejet_sim.engine import session as eng
 from pulsejet_sim.engine.live_loop import LiveLoop
 from pulsejet_sim.engine.outbox import TimedOutbox
-from pulsejet_sim.models.base import SimulationBlowUp
 from pulsejet_sim.ros import messages
 from pulsejet_sim.ros import sim_node_params as params
 from pulsejet_sim.ros.node_params import check_parameters
@@ -53,7 +53,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('sim_node', **kwargs)
-        from pulsejet_sim.simulation import Simulation
+        from pulsejet_sim.engine.simulation import Simulation
 
         self._ready = False
         self._outbox = TimedOutbox(name='sim_node publication')  # states computed ahead

@@ -53,8 +53,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from pulsejet_sim.core.topics import BASE_FRAME_ID, ODOM_FRAME_ID
 from pulsejet_sim.engine import session as eng
-from pulsejet_sim.interface import BASE_FRAME_ID, ODOM_FRAME_ID
 from pulsejet_sim.ros.executor import EXECUTOR_KINDS
 from pulsejet_sim.ros.node_params import (
     declare as declare_spec,
@@ -261,7 +261,7 @@ def load_scene_from_parameters(node, values: dict[str, Any]):
     (declared here, so that `ros2 param list/describe` shows it). The scene's validation refuses
     unknown keys and bad values; ValueError names them.
     """
-    from pulsejet_sim.models.schema import safe_load_yaml, YAMLInputError
+    from pulsejet_sim.core.schema import safe_load_yaml, YAMLInputError
     from pulsejet_sim.scene import load_scene, merge
     import yaml
 

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import math
 from typing import Any, Mapping
 
-from pulsejet_sim.models.base import Command, ModelError
-from pulsejet_sim.models.schema import check_section, Choice, Number
+from pulsejet_sim.core.model_io import Command, ModelError
+from pulsejet_sim.core.schema import check_section, Choice, Number
 
 PUMP_VALVE_SPEC = {
     'kind': Choice('pump_valve', ('pump_valve',)),

@@ -72,7 +72,7 @@ import time
 from typing import Any
 
 import numpy as np
-from pulsejet_sim import interface
+from pulsejet_sim.core import topics
 import yaml
 
 FIGURES = {
@@ -83,7 +83,7 @@ FIGURES = {
     'max_radius_m': 'largest published mantle radius in the window (m)',
     'peak_thrust_n': 'largest jet thrust in the window (N)',
 }
-SIGNALS = {'velocity': interface.TOPIC_VELOCITY, 'volume': interface.TOPIC_VOLUME}
+SIGNALS = {'velocity': topics.TOPIC_VELOCITY, 'volume': topics.TOPIC_VOLUME}
 TOP_KEYS = (
     'name',
     'description',
@@ -243,7 +243,7 @@ def dotted_overrides(values: dict[str, float]) -> dict:
 def load_fit(path: str | Path) -> FitSpec:
     """Read and validate a fit file (a path, or a name under config/fits/)."""
     from pulsejet_sim.scene import load_scene_data, merge, resolve_scene_path, SceneError
-    from pulsejet_sim.models.schema import read_config_file
+    from pulsejet_sim.scene.paths import read_config_file
 
     p, data = read_config_file(path, 'fits', 'fit file', FitError)
     if not isinstance(data, dict):
@@ -656,7 +656,7 @@ class Series:
 
 def simulate(spec: FitSpec, values: dict[str, float], duration_s: float | None = None) -> Series:
     """One run of the scene with `values` at its published samples (initial state included)."""
-    from pulsejet_sim.runner import Drive
+    from pulsejet_sim.studies.runner import Drive
 
     drive = Drive(build_scene(spec, values), spec.duration_s if duration_s is None else duration_s)
     first = drive.sim.observe()

@@ -3,7 +3,7 @@ Warm numba's on-disk compile cache for the shipped scenes.
 
 So a fresh install's first start is fast.
 
-    pulsejet_warmup [SCENE ...] [--quiet]          (or: python -m pulsejet_sim.warmup)
+    pulsejet_warmup [SCENE ...] [--quiet]          (or: python -m pulsejet_sim.engine.warmup)
 
 The physics kernels are ``@njit(cache=True)``: the first process that calls a kernel signature
 compiles it (the shell kernels take ~20 s) and writes the machine code to the cache
@@ -32,7 +32,7 @@ import sys
 import time
 
 # The modules of the njit(cache=True) physics kernels whose cache this warms and lists.
-KERNEL_MODULES = ('pulsejet_sim.models.lumped_kernels', 'pulsejet_sim.models.shell_kernels')
+KERNEL_MODULES = ('pulsejet_sim.models.lumped.kernels', 'pulsejet_sim.models.shell.kernels')
 
 
 def shipped_scenes(config_dir: str | os.PathLike | None = None) -> list[Path]:
@@ -44,7 +44,7 @@ def shipped_scenes(config_dir: str | os.PathLike | None = None) -> list[Path]:
     directory).
     """
     if config_dir is None:
-        from pulsejet_sim.scene import config_dirs
+        from pulsejet_sim.scene.paths import config_dirs
 
         dirs = config_dirs()
         if not dirs:
@@ -66,7 +66,7 @@ def kernel_signatures() -> tuple[set, set]:
     from numba.core.dispatcher import Dispatcher
 
     loaded, compiled = set(), set()
-    for name in KERNEL_MODULES + ('pulsejet_sim.models.lumped_batch',):
+    for name in KERNEL_MODULES + ('pulsejet_sim.models.lumped.batch',):
         mod = sys.modules.get(name)
         if mod is None:
             continue
@@ -87,9 +87,9 @@ def warm_scene(scene: str | os.PathLike) -> dict:
     and compiled (``kernel_signatures``; those an earlier scene of this process already needed are
     not counted), error (or None).
     """
-    from pulsejet_sim.models.base import SimulationBlowUp
+    from pulsejet_sim.core.model_io import SimulationBlowUp
+    from pulsejet_sim.engine.simulation import Simulation
     from pulsejet_sim.scene import load_scene
-    from pulsejet_sim.simulation import Simulation
 
     l0, c0 = kernel_signatures()
     t0 = time.perf_counter()

@@ -62,8 +62,8 @@ import time
 from typing import Any, Callable, Sequence
 
 import numpy as np
-from pulsejet_sim.fit import dotted_overrides, get_dotted, Parameter
-from pulsejet_sim.sweep import (
+from pulsejet_sim.studies.fit import dotted_overrides, get_dotted, Parameter
+from pulsejet_sim.studies.sweep import (
     executor_label,
     load_sweep,
     merge,
@@ -296,7 +296,7 @@ def _number(value: Any, where: str, allowed: str, positive: bool = False) -> flo
 def load_optimize(path: str | Path) -> OptimizeSpec:
     """Read and validate an optimisation file (a path, or a name under config/optimize/)."""
     from pulsejet_sim.scene import load_scene, SceneError
-    from pulsejet_sim.models.schema import read_config_file
+    from pulsejet_sim.scene.paths import read_config_file
 
     p, data = read_config_file(path, 'optimize', 'optimisation file', OptimizeError)
     if not isinstance(data, dict):
@@ -947,7 +947,7 @@ GRAVITY_M_S2 = 9.81
 def vehicle_mass_kg(scene) -> float:
     """Return the vehicle's dry mass (lumped: shell + payload; shell model: vehicle.mass_kg)."""
     if getattr(scene.model, 'name', '') == 'lumped':
-        from pulsejet_sim.models import lumped_kernels as K
+        from pulsejet_sim.models.lumped import kernels as K
 
         return float(scene.model.params[K.P_M_SOLID])
     return float((scene.data.get('vehicle') or {}).get('mass_kg', math.nan))
@@ -966,8 +966,8 @@ def routine_run(scene: str, routine: dict | None, duration_s: float) -> dict:
     - cost_of_transport: work_j / (mass_kg * 9.81 m/s^2 * distance_m), dimensionless (inf when the
       vehicle did not move forward).
     """
-    from pulsejet_sim.runner import Drive
     from pulsejet_sim.scene import load_scene
+    from pulsejet_sim.studies.runner import Drive
 
     out = {
         'fault': '',

@@ -100,8 +100,8 @@ def run_one(spec: RunSpec, on_batch: Callable[[Any], None] | None = None) -> Run
     `on_batch(sim)`, if given, is called with the Simulation after each published batch, for a
     caller's own measurements beside the metrics.
     """
-    from pulsejet_sim.runner import Drive
     from pulsejet_sim.scene import load_scene
+    from pulsejet_sim.studies.runner import Drive
 
     start = time.perf_counter()
     row = RunRow(name=spec.name, study=spec.study, labels=dict(spec.labels))
@@ -140,7 +140,7 @@ def run_one(spec: RunSpec, on_batch: Callable[[Any], None] | None = None) -> Run
 
 def load_sweep(path: str | os.PathLike) -> tuple[dict, list[RunSpec]]:
     """Read a sweep file and expand it into runs."""
-    from pulsejet_sim.models.schema import read_config_file
+    from pulsejet_sim.scene.paths import read_config_file
 
     p, data = read_config_file(path, 'sweeps', 'sweep', SweepError)
     if not isinstance(data, dict) or 'studies' not in data:

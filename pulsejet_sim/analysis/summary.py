@@ -1,7 +1,7 @@
 """
 Summary numbers and a 4-panel plot of a pulsejet MCAP recording (live or offline).
 
-A shell recording's plot also shows meridian snapshots over one cycle (pulsejet_sim.profiles).
+A shell recording's plot also shows meridian snapshots over one cycle (analysis.profiles).
 
 Reads with pulsejet_sim.bag.reader (no rclpy). Time axes are simulation time (header stamps, or
 log times mapped through /clock; see reader.load_series). Integrals use the trapezoidal rule over
@@ -17,24 +17,24 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-import sys
 from typing import Any, Sequence
 
 import numpy as np
-from pulsejet_sim import profiles
-from pulsejet_sim.bag.reader import BagInfo, BagReadError, find_topic, iter_bag, load_series
-from pulsejet_sim.interface import LEDGER_STATUS_NAME
-from pulsejet_sim.interface import TOPIC_ENERGY_LEDGER as ENERGY_LEDGER
-from pulsejet_sim.interface import TOPIC_FLUID_MASS as FLUID_MASS
-from pulsejet_sim.interface import TOPIC_MANTLE_RADIUS as MANTLE_RADIUS
-from pulsejet_sim.interface import TOPIC_THRUST as THRUST
-from pulsejet_sim.interface import TOPIC_VELOCITY as VELOCITY
-from pulsejet_sim.interface import TOPIC_VOLUME as VOLUME
+from pulsejet_sim.analysis import profiles
+from pulsejet_sim.analysis.tool import RecordingToolError, run_recording_tool
+from pulsejet_sim.bag.reader import BagInfo, find_topic, iter_bag, load_series
+from pulsejet_sim.core.topics import LEDGER_STATUS_NAME
+from pulsejet_sim.core.topics import TOPIC_ENERGY_LEDGER as ENERGY_LEDGER
+from pulsejet_sim.core.topics import TOPIC_FLUID_MASS as FLUID_MASS
+from pulsejet_sim.core.topics import TOPIC_MANTLE_RADIUS as MANTLE_RADIUS
+from pulsejet_sim.core.topics import TOPIC_THRUST as THRUST
+from pulsejet_sim.core.topics import TOPIC_VELOCITY as VELOCITY
+from pulsejet_sim.core.topics import TOPIC_VOLUME as VOLUME
 
 PULSEJET_TOPICS = (VELOCITY, THRUST, MANTLE_RADIUS, VOLUME, FLUID_MASS, ENERGY_LEDGER)
 
 
-class AnalysisError(ValueError):
+class AnalysisError(RecordingToolError):
     """The file is readable but holds nothing to analyse (names the file and what was expected)."""
 
 
@@ -329,25 +329,6 @@ def plot(path: str | Path, png_path: str | Path | None = None) -> Path:
     return out
 
 
-def _run(prog: str, argv: Sequence[str] | None, build, action) -> int:
-    parser = argparse.ArgumentParser(prog=prog)
-    build(parser)
-    args = parser.parse_args(argv)
-    try:
-        action(args)
-    except (BagReadError, AnalysisError, profiles.ProfileError) as exc:
-        print(f'{prog}: error: {exc}', file=sys.stderr)
-        return 2
-    except BrokenPipeError:  # output piped into `head`: nothing left to say
-        return 0
-    except OSError as exc:  # unreadable file or unwritable PNG path
-        if exc.filename is None:
-            raise
-        print(f'{prog}: error: {str(exc.filename)!r}: {exc.strerror}', file=sys.stderr)
-        return 2
-    return 0
-
-
 def main_summary(argv: Sequence[str] | None = None) -> int:
     """`pulsejet summary FILE.mcap`: print the summary table. Returns the exit code."""
 
@@ -357,7 +338,7 @@ def main_summary(argv: Sequence[str] | None = None) -> int:
     def action(args: argparse.Namespace) -> None:
         print(format_summary(summarize(args.file)))
 
-    return _run('pulsejet summary', argv, build, action)
+    return run_recording_tool('pulsejet summary', argv, build, action)
 
 
 def main_plot(argv: Sequence[str] | None = None) -> int:
@@ -372,4 +353,4 @@ def main_plot(argv: Sequence[str] | None = None) -> int:
     def action(args: argparse.Namespace) -> None:
         print(plot(args.file, args.out))
 
-    return _run('pulsejet plot', argv, build, action)
+    return run_recording_tool('pulsejet plot', argv, build, action)

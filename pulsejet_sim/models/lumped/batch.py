@@ -2,8 +2,8 @@
 Numba kernels that advance N lumped robots in one call (the vector environment's engine).
 
 Same physics, same arithmetic (``exact=True``): the right-hand side below is
-``lumped_kernels.rhs`` written for a block of robots (the same expressions in the same order,
-specialised on the same literal term flags), and the step is ``lumped_kernels._advance``'s RK4
+``lumped.kernels.rhs`` written for a block of robots (the same expressions in the same order,
+specialised on the same literal term flags), and the step is ``lumped.kernels._advance``'s RK4
 step (same stage sums, same valve stroke, same bound checks ``_check``). Only the order of the
 loops differs: robots are innermost inside each RK stage, so that LLVM vectorises the stage over
 robots (AVX2: 4 robots per instruction).
@@ -33,9 +33,9 @@ non-chaotic) dynamics carry to below 1e-12 of each state component's scale over 
 
 Steps that the vector path does not take: a robot whose step needs RK4 stability sub-steps
 (``rate * dt > 1.5``: a throttled fast flow or a stiff light shell) or whose valve seals a moving
-flow this step is advanced by ``lumped_kernels._advance`` itself for that one step (exactly the
+flow this step is advanced by ``lumped.kernels._advance`` itself for that one step (exactly the
 single-robot step; rare). A robot whose step fails keeps its last good state, gets a non-zero
-``status`` (lumped_kernels.ERR_*) and is skipped by later calls until the caller resets it
+``status`` (lumped.kernels.ERR_*) and is skipped by later calls until the caller resets it
 (``status[i] = OK``); ``done[i]`` counts the steps it made, as in ``_advance``.
 
 Arrays: states ``Y`` (N, NY) and parameters ``P`` (N, NP), C-contiguous, one row per robot;
@@ -58,7 +58,7 @@ from llvmlite import ir
 from numba import literally, njit, types
 from numba.extending import intrinsic
 import numpy as np
-from pulsejet_sim.models import lumped_kernels as K
+from pulsejet_sim.models.lumped import kernels as K
 
 # LLVM flags of the default (exact=False) path: 'arcp' lets it multiply by one reciprocal where
 # rhs divides several values by the same one (v_b, a_n, the masses), 'contract' fuses a multiply
@@ -68,15 +68,15 @@ from pulsejet_sim.models import lumped_kernels as K
 FAST_MATH = {'arcp', 'contract', 'nsz'}
 # FAST_MATH applies to the fast copy's own body and what is inlined into it (the stages, rhs,
 # the spheroid, _atanh_fast), never to the compiled helpers it calls: each says fastmath=False,
-# or it would inherit the flags of whichever copy compiled it first (see lumped_kernels)
+# or it would inherit the flags of whichever copy compiled it first (see lumped.kernels)
 
-# a bit of the batch kernel's literal flags, above lumped_kernels' bits (which ignore it):
+# a bit of the batch kernel's literal flags, above lumped.kernels' bits (which ignore it):
 # integrate the state and the pump's work only, not the ledger's losses and corrections
 # (Y_E_JET..Y_C_RAM), which nothing in the state depends on; they keep the caller's values
 LOSSES_OFF = 1 << 30
 N_LOSSES_OFF = K.Y_W_PUMP + 1  # components integrated with LOSSES_OFF
 BLOCK = 64  # robots per block (a multiple of the SIMD width; the block's rows stay in L1/L2)
-# a last block with fewer robots runs them one at a time (lumped_kernels._advance)
+# a last block with fewer robots runs them one at a time (lumped.kernels._advance)
 SCALAR_BELOW = 16
 
 # ---- rows of a block's work array (each BLOCK long) ---------------------------------------------
@@ -89,7 +89,7 @@ R_TQ = R_TU + 3
 R_E2 = R_TU + 4  # e^2 = 1 - (b/a)^2 and e of the spheroid at the stage's b
 R_E = R_TU + 5
 R_G = R_TU + 6  # atanh(e)
-R_SLOW = R_TU + 7  # 1: the step is taken by lumped_kernels._advance (sub-steps or sealing)
+R_SLOW = R_TU + 7  # 1: the step is taken by lumped.kernels._advance (sub-steps or sealing)
 R_ACTIVE = R_TU + 8  # 1: a real robot still advancing
 R_DONE = R_TU + 9
 R_STATUS = R_TU + 10
@@ -229,7 +229,7 @@ def _exact_added_mass(flags):
 @njit(cache=True, inline='always', error_model='numpy')
 def _rhs(flags, W, j, u, b, w, q_p):
     """
-    Compute lumped_kernels.rhs for robot j of the block at the stage state (u, b, w, q_p).
+    Compute lumped.kernels.rhs for robot j of the block at the stage state (u, b, w, q_p).
 
     Branch-free; returns the 16 derivatives and (damping rate, spring rate) of the diagnostics.
     ``x ** 2`` is written ``x * x`` and max(a, b) as its select: the values numba computes for them
@@ -258,7 +258,7 @@ def _rhs(flags, W, j, u, b, w, q_p):
     inertance = W[R_INERTANCE * B + j]
     m_l = inertance * v_b * v_b
 
-    # outer flow (lumped_kernels.added_mass)
+    # outer flow (lumped.kernels.added_mass)
     m_x = 0.0
     dmx_db = 0.0
     if flags & (K.T_ADDED_MASS | K.T_ADDED_MASS_VARIATION):
@@ -408,7 +408,7 @@ def _rhs(flags, W, j, u, b, w, q_p):
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _spheroid(flags, W):
-    """e^2 and e of the spheroid at the stage's b (lumped_kernels.added_mass's first lines)."""
+    """e^2 and e of the spheroid at the stage's b (lumped.kernels.added_mass's first lines)."""
     B = BLOCK
     for j in range(B):
         a = W[R_A * B + j]
@@ -431,7 +431,7 @@ def _atanh_pass(W, exact):
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _acc(W, j, c, stage, v):
-    """Stage sum of component c: k1, + 2 k2, + 2 k3, + k4 (as lumped_kernels._rk4 sums them)."""
+    """Stage sum of component c: k1, + 2 k2, + 2 k3, + k4 (as lumped.kernels._rk4 sums them)."""
     B = BLOCK
     if stage == 0:
         W[(R_ACC + c) * B + j] = v
@@ -516,7 +516,7 @@ def _stage(flags, W, stage, h, dt):
 @njit(cache=True, inline='always', error_model='numpy')
 def _valve_after_step(valve, v_cmd, stroke):
     """
-    Return the valve's opening after a step (lumped_kernels._advance's stroke and seat).
+    Return the valve's opening after a step (lumped.kernels._advance's stroke and seat).
 
     It moves by at most `stroke` towards the command; an opening below the seat becomes the seat
     (opening) or 0 (closing: it seals).
@@ -536,7 +536,7 @@ def _finish(flags, W, h):
     """
     Finish the step: new state y + h/6 (k1 + 2 k2 + 2 k3 + k4), the valve's stroke, the check.
 
-    The check is lumped_kernels._check; commits the robots that pass, flags the ones that fail
+    The check is lumped.kernels._check; commits the robots that pass, flags the ones that fail
     (their state stays the last good one). Returns the number of robots still active.
     """
     B = BLOCK
@@ -632,7 +632,7 @@ def _stage_state(W):
     Set the first stage's state to the state, and the valve's contraction and sealing flag.
 
     The valve's contraction over the step, and whether the valve seals a moving flow at the step's
-    end (lumped_kernels._advance's valve stroke).
+    end (lumped.kernels._advance's valve stroke).
     """
     B = BLOCK
     for j in range(B):
@@ -653,7 +653,7 @@ def _slow_steps(flags, W, P, start, n, dt, row):
     """
     Step the robots of the block whose step the vector path does not take.
 
-    Those need sub-steps, or the valve seals a moving flow; lumped_kernels._advance takes that one
+    Those need sub-steps, or the valve seals a moving flow; lumped.kernels._advance takes that one
     step.
     """
     B = BLOCK
@@ -677,7 +677,7 @@ def _advance_batch(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, exa
     B = BLOCK
     W = np.zeros(NROWS * B)
     row = np.empty(K.NY)
-    h = dt / 1  # lumped_kernels._advance's h = dt / n_sub, n_sub = 1
+    h = dt / 1  # lumped.kernels._advance's h = dt / n_sub, n_sub = 1
     spheroid = _exact_added_mass(flags)
     for start in range(0, n, B):
         if n - start < SCALAR_BELOW:
@@ -766,7 +766,7 @@ def advance_batch_exact(flags, Y, P, q_cmd, valve_cmd, n_steps, dt, done, status
     Advance every robot i with status[i] == OK by n_steps fixed steps of dt, exactly.
 
     Each robot holds (q_cmd[i], valve_cmd[i]); done[i]: steps it made, status[i]:
-    lumped_kernels.OK or ERR_*. The single-robot arithmetic and libm's atanh: bit for bit the
+    lumped.kernels.OK or ERR_*. The single-robot arithmetic and libm's atanh: bit for bit the
     single-robot runs.
     """
     _advance_batch_exact(literally(flags), Y, P, q_cmd, valve_cmd, n_steps, dt, done, status, True)

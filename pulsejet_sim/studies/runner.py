@@ -15,10 +15,10 @@ from pathlib import Path
 import threading
 from typing import Iterator
 
-from pulsejet_ctrl.routines import routine_from_scene
-from pulsejet_sim.models.base import Command, Observation, SimulationBlowUp
+from pulsejet_sim.core.model_io import Command, Observation, SimulationBlowUp
+from pulsejet_sim.engine.simulation import Simulation
+from pulsejet_sim.routines import routine_from_scene
 from pulsejet_sim.scene import Scene
-from pulsejet_sim.simulation import Simulation
 
 LEDGER_PERIOD_S = 0.2  # energy ledger messages at 5 Hz, as sim_node publishes them
 
@@ -97,8 +97,8 @@ def run_scene(
 def _record(drive: Drive, out: Path) -> RunResult:
     from pulsejet_sim.bag.cdr import stamp_ns, TopicEncoder
     from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
-    from pulsejet_sim.interface import TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER
-    from pulsejet_sim.interface import TOPIC_MANTLE_PROFILE
+    from pulsejet_sim.core.topics import TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER
+    from pulsejet_sim.core.topics import TOPIC_MANTLE_PROFILE
     import yaml
 
     sim, scene = drive.sim, drive.scene

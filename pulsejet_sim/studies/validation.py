@@ -27,12 +27,12 @@ import sys
 from typing import Any, Sequence
 
 import numpy as np
-from pulsejet_sim.models.base import SimulationBlowUp
-from pulsejet_sim.models.schema import read_yaml_file, YAMLInputError
+from pulsejet_sim.core.model_io import SimulationBlowUp
+from pulsejet_sim.core.schema import read_yaml_file, YAMLInputError
+from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.scene import load_scene, merge, SceneError
-from pulsejet_sim.simulation import Simulation
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CASES_DIR = ROOT / 'validation' / 'cases'
 POSTHOC_FILE = ROOT / 'validation' / 'posthoc.yaml'
 OUT_DIR = ROOT / 'docs' / 'validation'
@@ -188,7 +188,7 @@ class Trace:
 
 def run_trace(scene, duration_s: float, sample_period_s: float) -> Trace:
     """Run `scene` from its initial state under its routine (as `pulsejet run` does), sampling."""
-    from pulsejet_ctrl.routines import routine_from_scene
+    from pulsejet_sim.routines import routine_from_scene
 
     model = scene.model
     sim = Simulation(model)
@@ -260,7 +260,7 @@ def rest_fluid_mass_kg(model) -> float | None:
     """Fluid mass at the rest shape of a lumped model (None for other models)."""
     if getattr(model, 'name', '') != 'lumped':
         return None
-    from pulsejet_sim.models import lumped_kernels as K
+    from pulsejet_sim.models.lumped import kernels as K
 
     p = model.params
     volume = 4.0 / 3.0 * math.pi * p[K.P_A] * p[K.P_B0] ** 2 - p[K.P_V_SOLID]

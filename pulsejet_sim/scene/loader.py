@@ -14,27 +14,16 @@ import os
 from pathlib import Path
 from typing import Any
 
+from pulsejet_sim.core.model_io import Command, ModelError
+from pulsejet_sim.core.schema import Number, read_yaml_file, safe_load_yaml, show, YAMLInputError
 from pulsejet_sim.models import build_model
-from pulsejet_sim.models.base import Command, ModelError
-from pulsejet_sim.models.schema import Number, read_yaml_file, safe_load_yaml, show, YAMLInputError
+from pulsejet_sim.scene.paths import config_dirs
 
 DEFAULT_SCENE = 'shell_robot'  # the design card's default: the shell mantle
 
 
 class SceneError(ValueError):
     """A scene that cannot be found or read or that a model refuses (the message says why)."""
-
-
-def config_dirs() -> list[Path]:
-    """Where scene names are looked up: the source tree, then the installed share directory."""
-    dirs = [Path(__file__).resolve().parent.parent / 'config']
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        dirs.append(Path(get_package_share_directory('pulsejet_sim')) / 'config')
-    except Exception:  # not installed through colcon: the source tree is enough
-        pass
-    return [d for d in dirs if d.is_dir()]
 
 
 def available_scenes() -> list[str]:
@@ -225,8 +214,8 @@ def scene_from_dict(data: dict[str, Any], name: str = 'scene', path: Path | None
             'parameters'
         )
     if routine is not None:
-        from pulsejet_ctrl.routines import routine_from_scene  # pure, no ROS
-        from pulsejet_sim.models.base import check_command_value, CommandError
+        from pulsejet_sim.core.model_io import check_command_value, CommandError
+        from pulsejet_sim.routines import routine_from_scene  # pure, no ROS
 
         try:
             routine_from_scene(routine)
@@ -243,7 +232,7 @@ def scene_from_dict(data: dict[str, Any], name: str = 'scene', path: Path | None
         except (TypeError, ValueError, ArithmeticError, LookupError, AttributeError) as err:
             raise SceneError(
                 f'scene {name!r}: routine: {show(routine)} refused ({type(err).__name__}: '
-                f'{show(str(err))}); allowed: the parameters of pulsejet_ctrl.routines'
+                f'{show(str(err))}); allowed: the parameters of pulsejet_sim.routines'
             ) from None
     return Scene(
         name=name,

@@ -28,8 +28,8 @@ from dataclasses import asdict, dataclass
 import math
 
 import numpy as np
-from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import SimulationBlowUp
+from pulsejet_sim.core.model_io import SimulationBlowUp
+from pulsejet_sim.models.lumped import kernels as K
 
 
 @dataclass

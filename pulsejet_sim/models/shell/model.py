@@ -163,10 +163,10 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
-from pulsejet_sim.models import shell_kernels as sk
-from pulsejet_sim.models.base import Command, ModelError, Observation, SimulationBlowUp
-from pulsejet_sim.models.schema import show
-from pulsejet_sim.models.shell_geometry import build_profile, GEOMETRY_KINDS, Profile
+from pulsejet_sim.core.model_io import Command, ModelError, Observation, SimulationBlowUp
+from pulsejet_sim.core.schema import show
+from pulsejet_sim.models.shell import kernels as sk
+from pulsejet_sim.models.shell.geometry import build_profile, GEOMETRY_KINDS, Profile
 
 _KERNELS: dict = {}
 INTEGRATORS = {'verlet': (0, 1.0), 'implicit_midpoint': (1, 0.5), 'backward_euler': (1, 1.0)}

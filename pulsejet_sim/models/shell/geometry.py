@@ -25,7 +25,7 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
-from pulsejet_sim.models.base import ModelError
+from pulsejet_sim.core.model_io import ModelError
 
 GEOMETRY_KINDS = ('ellipsoid', 'cone', 'cap_cylinder', 'points')
 _DENSE = 4001

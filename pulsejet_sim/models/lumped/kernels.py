@@ -42,23 +42,24 @@ import math
 
 from numba import literally, njit
 import numpy as np
-from pulsejet_sim.models.base import VALVE_MIN_OPENING
+from pulsejet_sim.core.model_io import VALVE_MIN_OPENING
 
-# the valve's seat: its opening is 0 or in [VALVE_SEAT, 1] (base.VALVE_MIN_OPENING says why).
-# Written out here, not assigned from base: numba freezes it into the cached kernels, and it
-# invalidates a cache entry when the function's own file changes, not base.py (nor, for
-# lumped_batch's kernels, this file: clear pulsejet_sim/models/__pycache__/*.nb[ic] after a change)
+# the valve's seat: its opening is 0 or in [VALVE_SEAT, 1] (core.model_io says why).
+# Written out here, not assigned from core.model_io: numba freezes it into the cached kernels, and
+# it invalidates a cache entry when the function's own file changes, not model_io.py (nor, for
+# lumped.batch's kernels, this file: clear pulsejet_sim/models/lumped/__pycache__/*.nb[ic] after a
+# change)
 VALVE_SEAT = 1.5e-3
 if VALVE_SEAT != VALVE_MIN_OPENING:
     raise ImportError(
-        f'lumped_kernels.VALVE_SEAT={VALVE_SEAT} differs from base.VALVE_MIN_OPENING='
+        f'lumped.kernels.VALVE_SEAT={VALVE_SEAT} differs from model_io.VALVE_MIN_OPENING='
         f'{VALVE_MIN_OPENING}; allowed: the same value (change both)'
     )
 
 # ---- term bits --------------------------------------------------------------------------------
 # Every compiled (not inlined) kernel here says fastmath=False. numba compiles a callee with the
 # fastmath flags of its first caller unless the callee sets them, and keeps that one version per
-# signature for every caller, on-disk cache included: lumped_batch's fast path (FAST_MATH) calls
+# signature for every caller, on-disk cache included: lumped.batch's fast path (FAST_MATH) calls
 # _advance, and the single-robot runs could otherwise inherit its rewrites and stop being
 # bit-exact (found by review: the exact batch kernel did, after the fast one had compiled).
 T_SHELL_INERTIA = 1 << 0

@@ -44,12 +44,12 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, find_topic, iter_bag, stamp_to_s
-from pulsejet_sim.interface import APPLIED_COMMAND_NAMES
-from pulsejet_sim.interface import TOPIC_APPLIED_COMMAND as APPLIED_COMMAND
-from pulsejet_sim.interface import TOPIC_MANTLE_RADIUS as MANTLE_RADIUS
-from pulsejet_sim.interface import TOPIC_VELOCITY as VELOCITY
-from pulsejet_sim.interface import TOPIC_VOLUME as VOLUME
-from pulsejet_sim.models.base import Command, CommandError, SimulationBlowUp
+from pulsejet_sim.core.model_io import Command, CommandError, SimulationBlowUp
+from pulsejet_sim.core.topics import APPLIED_COMMAND_NAMES
+from pulsejet_sim.core.topics import TOPIC_APPLIED_COMMAND as APPLIED_COMMAND
+from pulsejet_sim.core.topics import TOPIC_MANTLE_RADIUS as MANTLE_RADIUS
+from pulsejet_sim.core.topics import TOPIC_VELOCITY as VELOCITY
+from pulsejet_sim.core.topics import TOPIC_VOLUME as VOLUME
 
 COMPARED_TOPICS = (VELOCITY, VOLUME, MANTLE_RADIUS)
 # topic -> Observation attribute it carries
@@ -284,7 +284,7 @@ def stored_scene(path: str | Path) -> Any | None:
     followed). ResimError names what was refused.
     """
     from pulsejet_sim.bag.reader import read_metadata
-    from pulsejet_sim.models.schema import show
+    from pulsejet_sim.core.schema import show
     from pulsejet_sim.scene import is_project_scene_name, load_scene, scene_from_stored, SceneError
 
     found = read_metadata(path, METADATA_NAME)
@@ -361,7 +361,7 @@ def resimulate(
     dt_s: physics step overriding the scene's (a recording made with `pulsejet run --dt`).
     Raises ResimError (or BagReadError) for an unreadable file or missing data.
     """
-    from pulsejet_sim.simulation import Simulation
+    from pulsejet_sim.engine.simulation import Simulation
 
     path = Path(bag_path)
     if dt_s is not None and not (

@@ -19,7 +19,7 @@ import math
 import reprlib
 from typing import Any, Mapping
 
-from pulsejet_sim.models.base import ModelError
+from pulsejet_sim.core.model_io import ModelError
 import yaml
 
 MAX_YAML_BYTES = 1 << 20  # 1 MiB: a scene is a few kB, a sweep or fit some tens of kB
@@ -259,30 +259,3 @@ def check_section(section: str, given: Any, spec: Mapping[str, Any]) -> dict[str
         else:
             out[key] = rule.default
     return out
-
-
-def read_config_file(path: Any, folder: str, what: str, error: type) -> tuple[Any, Any]:
-    """
-    Return (file path, parsed data) of a YAML file: a path or a name under config/<folder>/.
-
-    The file is read with the bounded safe loader; raises `error` naming the file when it is
-    missing or not valid YAML (sweeps, fits and optimisations share this).
-    """
-    from pathlib import Path
-
-    from pulsejet_sim.scene import config_dirs  # the one place that knows where config/ is
-
-    p = Path(path)
-    if not p.is_file():
-        builtin = [d / folder / f'{path}.yaml' for d in config_dirs()]
-        builtin = [b for b in builtin if b.is_file()]
-        if not builtin:
-            raise error(
-                f'{what} {str(path)!r} not found; allowed: a YAML path or a name under '
-                f'config/{folder}/'
-            )
-        p = builtin[0]
-    try:
-        return p, read_yaml_file(p, f'{what} {str(p)!r}')
-    except YAMLInputError as err:
-        raise error(str(err)) from None

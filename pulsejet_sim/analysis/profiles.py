@@ -23,8 +23,9 @@ import sys
 from typing import Any, Iterable, Sequence
 
 import numpy as np
+from pulsejet_sim.analysis.tool import RecordingToolError, run_recording_tool
 from pulsejet_sim.bag.reader import BagInfo, find_topic, iter_bag, read_metadata, stamp_to_s
-from pulsejet_sim.interface import TOPIC_MANTLE_PROFILE, TOPIC_MANTLE_RADIUS
+from pulsejet_sim.core.topics import TOPIC_MANTLE_PROFILE, TOPIC_MANTLE_RADIUS
 
 PROFILE_TYPE = 'geometry_msgs/msg/PolygonStamped'
 METADATA_NAME = 'pulsejet'  # the runner's metadata record, key scene_yaml (see runner._record)
@@ -39,7 +40,7 @@ MAX_GIF_FRAMES = 1000
 MM_PER_M = 1e3
 
 
-class ProfileError(ValueError):
+class ProfileError(RecordingToolError):
     """Bad input for the profile tools: names the file or value and what is allowed."""
 
 
@@ -182,7 +183,7 @@ def period_from_scene_data(data: Any) -> tuple[float, float] | None:
             return (1.0 / freq, delay) if freq and delay is not None else None
         if _positive(routine.get('target_volume_m3')):
             return None
-        # the routine's defaults when a key is left out (pulsejet_ctrl.routines.PUMP_VALVE_SPEC)
+        # the routine's defaults when a key is left out (pulsejet_sim.routines.PUMP_VALVE_SPEC)
         parts = [
             _nonnegative(routine.get(key, default))
             for key, default in (('inflate_s', 2.0), ('hold_s', 0.2), ('jet_s', 1.8))
@@ -207,7 +208,7 @@ def stored_scene_data(path: str | Path, info: BagInfo | None = None) -> dict[str
     already filled it (no second pass over the file). The stored YAML is untrusted: read with the
     safe loader; callers take only plain numbers and names from it.
     """
-    from pulsejet_sim.models.schema import safe_load_yaml, YAMLInputError
+    from pulsejet_sim.core.schema import safe_load_yaml, YAMLInputError
 
     if info is not None and info.metadata:
         found: dict[str, str] = {}
@@ -758,7 +759,6 @@ def main_animate(argv: Sequence[str] | None = None) -> int:
     `pulsejet animate FILE.mcap [-o OUT.gif|.mp4] [--fps N] [--start S] [--end S] [--stride K]`.
     Exit code 2 on bad input, with a one-line error.
     """
-    from pulsejet_sim.analysis import _run  # the shared error handling of the recording tools
 
     def action(args: argparse.Namespace) -> None:
         out, frames, profiles = animate(
@@ -769,4 +769,4 @@ def main_animate(argv: Sequence[str] | None = None) -> int:
             f'{profiles.time_s[0]:.3f}-{profiles.time_s[-1]:.3f} s, {args.fps:g} fps)'
         )
 
-    return _run('pulsejet animate', argv, _build_animate, action)
+    return run_recording_tool('pulsejet animate', argv, _build_animate, action)

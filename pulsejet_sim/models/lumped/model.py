@@ -2,7 +2,7 @@
 Lumped pulsed-jet model (paper 001).
 
 Immutable parameters compiled from a scene, plus the Model-protocol methods that drive the numba
-kernels in ``lumped_kernels``.
+kernels in ``lumped.kernels``.
 
 The derivation, the choices where the paper is ambiguous and the energy ledger are in
 ``docs/PHYSICS_LUMPED.md``.
@@ -15,15 +15,15 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
-from pulsejet_sim.models import lumped_kernels as K
-from pulsejet_sim.models.base import (
+from pulsejet_sim.core.model_io import (
     Command,
     ModelError,
     Observation,
     SimulationBlowUp,
     VALVE_MIN_OPENING,
 )
-from pulsejet_sim.models.schema import check_section, Choice, Flag, Number
+from pulsejet_sim.core.schema import check_section, Choice, Flag, Number
+from pulsejet_sim.models.lumped import kernels as K
 from scipy import integrate
 
 TERM_BITS = {
@@ -45,7 +45,7 @@ SIMULATION_SPEC = {
     'publish_rate_hz': Number(100.0, 1.0, 10000.0, unit='Hz'),
     # rk4: fixed step dt_s (with stability sub-steps), what HIL and bit-exact replays use;
     # adaptive: Dormand-Prince 5(4) with error control (rtol, atol) and dense output; dt_s is then
-    # only the time grid of Simulation.step (lumped_kernels, "adaptive")
+    # only the time grid of Simulation.step (lumped.kernels, "adaptive")
     'integrator': Choice('rk4', ('rk4', 'adaptive')),
     'rtol': Number(1e-6, 1e-13, 1e-2, unit='(relative tolerance, adaptive only)'),
     'atol': Number(1e-9, 1e-16, 1e-2, unit='(absolute tolerance, adaptive only)'),
@@ -192,7 +192,7 @@ class LumpedModel:
         )
         if (
             0.0 < act['initial_valve_opening'] < VALVE_MIN_OPENING
-        ):  # below the valve's seat (base.VALVE_MIN_OPENING)
+        ):  # below the valve's seat (model_io.VALVE_MIN_OPENING)
             raise ModelError(
                 f'actuator.initial_valve_opening: {act["initial_valve_opening"]!r} is out of '
                 'range; '

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from pulsejet_sim.models.base import Command, Observation, SimulationBlowUp
+from pulsejet_sim.core.model_io import Command, Observation, SimulationBlowUp
 
 
 class Simulation:

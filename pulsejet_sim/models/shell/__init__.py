@@ -1,0 +1,1 @@
+"""The Reissner shell model of paper 000: geometry, parameters and stepping, kernels."""
