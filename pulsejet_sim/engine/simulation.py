@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from pulsejet_sim.core.model_io import Command, Observation, SimulationBlowUp
+from pulsejet_sim.core.protocol import Model
 
 
 class Simulation:
     """Mutable state of one run of an immutable model (MuJoCo's model/data split)."""
 
-    def __init__(self, model, command: Command | None = None):
+    def __init__(self, model: Model, command: Command | None = None):
         self.model = model
         # the model's actuator ranges (e.g. a shell robot's cable rating) within Command.LIMITS
         self.command_limits = dict(getattr(model, 'command_limits', None) or Command.LIMITS)
