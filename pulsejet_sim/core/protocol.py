@@ -25,7 +25,7 @@ class Model(Protocol):
 
     @classmethod
     def from_scene(cls, scene: Mapping[str, Any]) -> 'Model':
-        """Build the model a scene's data describes (raises core.model_io.ModelError naming a key)."""
+        """Build the model a scene's data describes (ModelError names a bad key)."""
 
     def initial_state(self) -> np.ndarray:
         """Return a new state vector at t = 0."""
