@@ -53,14 +53,14 @@ from __future__ import annotations
 import math
 import sys
 
-from pulsejet_ctrl.controller_params import (  # noqa: F401 (ROUTINE_FIELDS: re-exported)
+from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.controller_params import (  # noqa: F401 (ROUTINE_FIELDS: re-exported)
     INTEGER_FIELDS,
     NODE_PARAMETERS,
     ROUTINE_FIELDS,
     routine_parameters,
     ROUTINE_SPECS,
 )
-from pulsejet_sim.ros import messages
 from pulsejet_sim.ros.node_params import check_parameters, declare, ParamSpec
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockChange, JumpThreshold

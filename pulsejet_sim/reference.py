@@ -124,8 +124,7 @@ def topics_section() -> list[str]:
 
 
 def parameters_section() -> list[str]:
-    from pulsejet_ctrl import controller_params
-    from pulsejet_sim.ros import sim_node_params
+    from pulsejet_sim.ros import controller_params, sim_node_params
 
     header = ('parameter', 'type', 'default', 'live', 'allowed', 'meaning')
     out = ['## Parameters of sim_node', '']
@@ -150,8 +149,8 @@ def parameters_section() -> list[str]:
 
 
 def scene_section() -> list[str]:
-    from pulsejet_ctrl import routines
     from pulsejet_sim.models import lumped
+    from pulsejet_sim.ros.controller_params import ROUTINE_SPECS
 
     header = ('key', 'default', 'allowed', 'unit')
     out = ['## Scene keys', '']
@@ -165,7 +164,7 @@ def scene_section() -> list[str]:
         out += [f'#### `{section}:`', '']
         out += _table(header, [(f'`{k}`', *_rule_cells(r)) for k, r in spec.items()])
     out += ['### Routine (`routine:`, both models)', '']
-    for kind, spec in (('pump_valve', routines.PUMP_VALVE_SPEC), ('cable', routines.CABLE_SPEC)):
+    for kind, spec in ROUTINE_SPECS.items():
         out += [f'#### `kind: {kind}`', '']
         out += _table(header, [(f'`{k}`', *_rule_cells(r)) for k, r in spec.items()])
     out += ['### Shell model (`model: shell`)', '']

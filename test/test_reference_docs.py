@@ -20,10 +20,9 @@ def test_reference_tables_match_the_code():
 
 
 def test_tables_name_every_declared_topic_service_and_parameter():
-    from pulsejet_ctrl import controller_params
     from pulsejet_sim import interface
     from pulsejet_sim.models import lumped
-    from pulsejet_sim.ros import sim_node_params
+    from pulsejet_sim.ros import controller_params, sim_node_params
 
     text = reference.render()
     names = (

@@ -2,9 +2,10 @@
 The parameters of controller_node as data, importable without ROS.
 
 controller_node declares these (`pulsejet_ctrl.controller_node`); the reference tables of the docs
-(`pulsejet_sim.reference`) read them too. The node's own parameters are fixed; the routine's come
-from the routine's scene spec (`pulsejet_ctrl.routines`: default, range and unit of each field),
-with the scene's `routine:` values as defaults.
+(`pulsejet_sim.reference`) read them too, which is why they live here and not beside the node: the
+reference tables then read no module of `pulsejet_ctrl` but its routines. The node's own
+parameters are fixed; the routine's come from the routine's scene spec (`pulsejet_ctrl.routines`:
+default, range and unit of each field), with the scene's `routine:` values as defaults.
 """
 
 from __future__ import annotations
