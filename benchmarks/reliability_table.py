@@ -1,11 +1,11 @@
 """
 Run the property tests' generators at a larger example count; write the reliability table.
 
-The table of docs/RELIABILITY.md (inputs tried, faults injected, survived, data lost), with date,
-machine and command.
+The table of docs/dev/reliability.md (inputs tried, faults injected, survived, data lost), with
+date, machine and command.
 
     .venv/bin/python benchmarks/reliability_table.py [--examples N] [--kills K]
-                                                     [--out docs/RELIABILITY.md]
+                                                     [--out docs/dev/reliability.md]
 
 The generators and checks are the ones of test/test_fuzz_inputs.py, test/test_mcap_corruption.py
 and test/test_repair.py (imported from there, so the table and `make test` exercise the same code);
@@ -434,7 +434,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         '--out',
-        default=str(REPO / 'docs' / 'RELIABILITY.md'),
+        default=str(REPO / 'docs' / 'dev' / 'reliability.md'),
         help='markdown file whose table (between the markers) is replaced',
     )
     args = parser.parse_args(argv)

@@ -53,11 +53,15 @@ from __future__ import annotations
 import math
 import sys
 
-from pulsejet_sim import routines as _routines
-from pulsejet_sim.core.schema import Choice
 from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.controller_params import (  # noqa: F401 (ROUTINE_FIELDS: re-exported)
+    INTEGER_FIELDS,
+    NODE_PARAMETERS,
+    ROUTINE_FIELDS,
+    routine_parameters,
+    ROUTINE_SPECS,
+)
 from pulsejet_sim.ros.node_params import check_parameters, declare, ParamSpec
-from pulsejet_sim.scene import DEFAULT_SCENE
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockChange, JumpThreshold
 from rclpy.clock_type import ClockType
@@ -67,25 +71,6 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64
 
-#: routine field -> description (ranges and defaults come from the routine's spec)
-ROUTINE_FIELDS = {
-    'inflate_s': 's of pump inflation per cycle',
-    'target_volume_m3': 'inflate until this cavity volume instead (0 = use inflate_s), m^3',
-    'pump_flow_m3_s': 'pump flow while inflating, m^3/s',
-    'hold_s': 's with pump off and valve shut before the jet',
-    'jet_s': 's with the valve open (jetting)',
-    'valve_opening': 'valve opening while jetting, 0..1',
-    'cycles': 'number of cycles (0 = forever)',
-    'start_delay_s': 's of simulated time before the first cycle',
-    'pulse': 'shape of the rise and release: half_cosine or triangle (straight lines)',
-    'amplitude_n': 'peak cable pull, N',
-    'frequency_hz': 'cable pulls per second of simulated time, Hz',
-    'contraction_s': 's of the rise of the pull (see pulse)',
-    'release_s': 's of the release of the pull (see pulse)',
-}
-INTEGER_FIELDS = ('cycles',)
-#: routine kind -> field -> pulsejet_sim.core.schema.Number (default, range)
-ROUTINE_SPECS = {'pump_valve': _routines.PUMP_VALVE_SPEC, 'cable': _routines.CABLE_SPEC}
 #: wall seconds between re-sends of the t = 0 command while the ROS clock reads 0 (not started)
 STANDBY_PERIOD_S = 0.2
 USE_SIM_TIME = 'use_sim_time'
@@ -102,29 +87,10 @@ class ControllerNode(Node):
         self._ready = False
         # every value is checked here, at declaration (command-line overrides) and on live changes
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._declare(
-            ParamSpec(
-                'scene',
-                DEFAULT_SCENE,
-                'scene whose routine block gives the default parameters',
-                read_only=True,
-                allowed='a scene name under config/ or a YAML file path',
-            )
-        )
-        self._declare(
-            ParamSpec('rate_hz', 50.0, 'command rate in simulated time (Hz); live', 1e-3, 10000.0)
-        )
-        self.closed_loop = bool(
-            self._declare(
-                ParamSpec(
-                    'closed_loop',
-                    False,
-                    'answer every state with one atomic command stamped at its time '
-                    '(for sim_node pacing closed_loop)',
-                    read_only=True,
-                )
-            )
-        )
+        scene_spec, rate_spec, closed_loop_spec = NODE_PARAMETERS
+        self._declare(scene_spec)
+        self._declare(rate_spec)
+        self.closed_loop = bool(self._declare(closed_loop_spec))
         # use_sim_time defaults to true here, except with closed_loop (the state stamps drive the
         # routine there: no /clock subscription, as before). rclpy's TimeSource declared it
         # (default false) in Node.__init__; constructor parameter_overrides would beat the command
@@ -149,31 +115,9 @@ class ControllerNode(Node):
             )
         self._routine_cls = routines.ROUTINES[kind]
         config = dict(scene_routine, kind=kind)
-        for name, number in ROUTINE_SPECS[kind].items():
-            if name == 'kind':
-                continue
-            if isinstance(number, Choice):  # a word, e.g. the cable's pulse shape
-                default = scene_routine.get(name, number.default)
-                spec = ParamSpec(
-                    name,
-                    default,
-                    ROUTINE_FIELDS.get(name, name),
-                    choices=number.choices,
-                    read_only=True,
-                )
-                config[name] = self._declare(spec)
-                continue
-            kind_of = int if name in INTEGER_FIELDS else float
-            description = ROUTINE_FIELDS.get(name, f'{name} ({number.unit})')
-            if number.low_open:
-                description += f' (> {number.low:g})'
-            low, high = number.low, number.high
-            default = scene_routine.get(name, number.default)
-            # `inflate_s:=2` is declared as the double 2.0 (node_params.declare says so); the
-            # routine checks the values too.
-            # Read-only: they define the routine's state machine (restart the node to change them).
-            spec = ParamSpec(name, kind_of(default), description, low, high, read_only=True)
-            config[name] = kind_of(self._declare(spec))
+        for spec in routine_parameters(kind, scene_routine):
+            value = self._declare(spec)
+            config[spec.name] = int(value) if spec.name in INTEGER_FIELDS else value
         self.config = config
         self.routine = self._routine_cls.from_config(dict(config))
         self.rate_hz = float(self.get_parameter('rate_hz').value)

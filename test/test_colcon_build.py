@@ -178,18 +178,17 @@ def test_build_warms_numba_cache_of_installed_kernels(workspace):
     ), 'setup.py did not report a warmed numba cache:\n' + '\n'.join(
         line for line in out.splitlines() if 'numba' in line or 'warm' in line
     )
-    cache = site_packages(workspace) / PACKAGE / 'models' / '__pycache__'
-    for module in ('lumped.kernels', 'shell.kernels'):
-        index = list(cache.glob(f'{module}.advance-*.nbi'))
-        data = list(cache.glob(f'{module}.advance-*.nbc'))
-        assert index and data, f'no numba cache of {module}.advance in {cache}: ' + ', '.join(
-            sorted(p.name for p in cache.glob('*.nb?'))
-        )
+    for model in ('lumped', 'shell'):
+        cache = site_packages(workspace) / PACKAGE / 'models' / model / '__pycache__'
+        index = list(cache.glob('kernels.advance-*.nbi'))
+        data = list(cache.glob('kernels.advance-*.nbc'))
+        found = ', '.join(sorted(p.name for p in cache.glob('*.nb?')))
+        assert index and data, f'no numba cache of {model}.kernels.advance in {cache}: {found}'
     # recorded as installed files, so colcon removes them with the rest (switch to
     # --symlink-install)
     record = (workspace / 'build' / PACKAGE / 'install.log').read_text().splitlines()
     assert any(
-        line.endswith('.nbi') and 'shell.kernels.advance' in line for line in record
+        line.endswith('.nbi') and 'shell/__pycache__/kernels.advance' in line for line in record
     ), 'the numba cache files are not in the install record'
 
 
@@ -255,8 +254,9 @@ def test_installed_sim_node_first_state_from_warm_cache(workspace, scene):
     assert (
         received
     ), f'no state on /clock from the installed sim_node (scene {scene}):\n{out[-4000:]}'
-    site = str(site_packages(workspace) / PACKAGE / 'models' / '__pycache__')
-    module = 'lumped.kernels' if scene == 'pump_cycle' else 'shell.kernels'
+    model = 'lumped' if scene == 'pump_cycle' else 'shell'
+    site = str(site_packages(workspace) / PACKAGE / 'models' / model / '__pycache__')
+    module = 'kernels'
     loaded = [
         line
         for line in out.splitlines()

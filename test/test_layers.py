@@ -19,7 +19,7 @@ PACKAGES = ('pulsejet_sim', 'pulsejet_ctrl')
 
 # Top first. Modules of one layer may import each other (without cycles).
 LAYERS: list[tuple[str, ...]] = [
-    ('pulsejet_ctrl',),
+    ('pulsejet_ctrl', 'pulsejet_sim.reference'),
     ('pulsejet_sim.ros',),
     ('pulsejet_sim.cli',),
     ('pulsejet_sim.studies', 'pulsejet_sim.view'),

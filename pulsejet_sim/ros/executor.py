@@ -37,9 +37,10 @@ import contextlib
 import io
 import os
 import sys
-from typing import Iterator
+from typing import Iterator, TYPE_CHECKING
 
-from rclpy.executors import Executor, SingleThreadedExecutor
+if TYPE_CHECKING:  # imported where used: EXECUTOR_KINDS is read without ROS (parameter tables)
+    from rclpy.executors import Executor
 
 EXECUTOR_ENV = 'PULSEJET_EXECUTOR'
 EXECUTOR_KINDS = ('events', 'single')
@@ -94,5 +95,7 @@ def make_executor(context=None, kind: str | None = None) -> Executor:
         with _stderr_with_a_file():
             return EventsExecutor(context=context)
     if kind == 'single':
+        from rclpy.executors import SingleThreadedExecutor
+
         return SingleThreadedExecutor(context=context)
     raise ValueError(f'kind={kind!r} rejected; allowed: one of {", ".join(EXECUTOR_KINDS)}')

@@ -17,14 +17,10 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+from typing import TYPE_CHECKING
 
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    ParameterType,
-    SetParametersResult,
-)
+if TYPE_CHECKING:  # rclpy's types are imported where used: the tables import without ROS
+    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,7 +59,26 @@ class ParamSpec:
             return 'true or false'
         return 'a string'
 
+    def type_name(self) -> str:
+        """Return the ROS parameter type the default declares: bool, integer, double, string..."""
+        if isinstance(self.default, bool):
+            return 'bool'
+        if isinstance(self.default, int):
+            return 'integer'
+        if isinstance(self.default, float):
+            return 'double'
+        if isinstance(self.default, (list, tuple)):
+            return 'string[]'
+        return 'string'
+
     def descriptor(self) -> ParameterDescriptor:
+        from rcl_interfaces.msg import (
+            FloatingPointRange,
+            IntegerRange,
+            ParameterDescriptor,
+            ParameterType,
+        )
+
         d = ParameterDescriptor(
             description=f'{self.description}; allowed: {self.allowed_text()}',
             read_only=self.read_only,
@@ -135,6 +150,7 @@ def declare(node, spec: ParamSpec):
     `ros2 param describe` says, and a later `ros2 param set` with an integer is refused by rclpy
     ("Wrong parameter type, expected 'Type.DOUBLE' got 'Type.INTEGER'"), as on every ROS node.
     """
+    from rcl_interfaces.msg import ParameterType
     from rclpy.parameter import Parameter
 
     descriptor = spec.descriptor()
@@ -186,6 +202,8 @@ def check_parameters(params, specs) -> tuple[dict, SetParametersResult | None]:
 
     Returns the converted values, or a rejection naming the first bad value and what is allowed.
     """
+    from rcl_interfaces.msg import SetParametersResult
+
     checked = {}
     for param in params:
         spec = specs.get(param.name)
@@ -212,6 +230,8 @@ def scene_override_names(overrides) -> list[str]:
 
 
 def scene_override_descriptor(name: str) -> ParameterDescriptor:
+    from rcl_interfaces.msg import ParameterDescriptor
+
     key = name[len(SCENE_PREFIX):]
     return ParameterDescriptor(
         description=f'scene override: the value of scene key {key} (merged over the scene file '
