@@ -19,7 +19,7 @@ ambient water ahead of the nozzle that the forming ring sets moving.  Here that 
     p_ex   = 0                  while it decelerates, and after pinch-off.
 
 *Why one-sided.*  The water that the over-pressure accelerates leaves with the ring (Olcay &
-Krueger 2010, Theor. Comput. Fluid Dyn. 24, 535: the ejected fluid exchanges its momentum mostly
+Krueger, Theor. Comput. Fluid Dyn., doi:10.1007/s00162-009-0173-y, abstract: the ejected fluid exchanges its momentum mostly
 with the added mass during ejection, and that momentum is carried by the ring), so the
 deceleration does not take it back: the pulse's over-pressure impulse is ``m_d u_peak`` (the
 impulsive start's ``(8/3) rho R^3 U`` of Krueger 2005).  Moslemi (2020, arXiv:2101.00075) finds
@@ -28,7 +28,8 @@ model follows the force-balance measurements instead (docs/theory/starting_jet.m
 
 *Pinch-off.*  The formation time of the current pulse, ``T* = int u_j / D dt`` (Gharib, Rambod &
 Shariff 1998, J. Fluid Mech. 360, 121: the stroke ratio L/D of a piston-cylinder; Dabiri & Gharib
-2005 integrate ``u/D(t)`` for a nozzle whose diameter changes), grows while water leaves and is
+2005, J. Fluid Mech. 538, not looked up here, integrate ``u/D(t)`` for a nozzle whose diameter
+changes), grows while water leaves and is
 reset to 0 when the outflow stops (the volume rate is no longer negative: the valve closes or the
 mantle refills).  A step that starts at ``T* >= F`` (the formation number, 4 by default, Gharib
 et al. 1998) carries no over-pressure: the ring has pinched off and the trailing jet is
