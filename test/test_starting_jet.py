@@ -53,13 +53,14 @@ def test_an_impulsive_start_gets_the_discs_added_mass_impulse():
 
 def test_the_impulse_ratio_over_the_stroke_ratio_has_the_measured_trends():
     """
-    Krueger & Gharib (2003), abstract: the impulse of ring formation is much larger than the slug
-    model's, and proportionally larger than a trailing jet's (it falls with L/D).
+    Krueger & Gharib (2003), abstract: ring formation's impulse exceeds the slug model's.
 
-    Their measured I/I_slug curve could not be looked up here (docs/theory/starting_jet.md,
-    "Verification"); this test asserts the model's curve for a ramped program (ramps of 20 % of
-    a pulse at L/D = 2, as a smooth piston motion) and its trends: above 1 at every L/D, falling
-    with L/D, and at or above the impulsive start's 1 + 0.42/(L/D).
+    "Much larger than that expected from the jet velocity alone and proportionally larger than
+    that associated with a trailing jet": the ratio exceeds 1 and falls with L/D.  Their measured
+    I/I_slug curve could not be looked up here (docs/theory/starting_jet.md, "Verification");
+    this test asserts the model's curve for a ramped program (ramps of 20 % of a pulse at
+    L/D = 2, as a smooth piston motion) and its trends: above 1 at every L/D, falling with L/D,
+    and at or above the impulsive start's 1 + 0.42/(L/D).
     """
     peak = 0.2
     ramp = 0.2 * 2.0 * D / peak

@@ -280,7 +280,7 @@ def _unknown(sec, where, allowed):
 
 def starting_jet_setting(jet, coupling, integrator, jet_on):
     """
-    Formation number of ``jet.starting_jet`` (models/starting_jet.py), or 0 when the term is off.
+    Return the formation number of ``jet.starting_jet`` (models/starting_jet.py), 0 when off.
 
     ``starting_jet: true`` adds the forming vortex ring's exit over-pressure; ``formation_number``
     (default 4, Gharib, Rambod & Shariff 1998) ends it at pinch-off.  The over-pressure must be

@@ -19,12 +19,13 @@ ambient water ahead of the nozzle that the forming ring sets moving.  Here that 
     p_ex   = 0                  while it decelerates, and after pinch-off.
 
 *Why one-sided.*  The water that the over-pressure accelerates leaves with the ring (Olcay &
-Krueger, Theor. Comput. Fluid Dyn., doi:10.1007/s00162-009-0173-y, abstract: the ejected fluid exchanges its momentum mostly
-with the added mass during ejection, and that momentum is carried by the ring), so the
-deceleration does not take it back: the pulse's over-pressure impulse is ``m_d u_peak`` (the
-impulsive start's ``(8/3) rho R^3 U`` of Krueger 2005).  Moslemi (2020, arXiv:2101.00075) finds
-by simulation an under-pressure during the deceleration of tube-nozzle jets and no net gain; this
-model follows the force-balance measurements instead (docs/theory/starting_jet.md, "Limits").
+Krueger, Theor. Comput. Fluid Dyn., doi:10.1007/s00162-009-0173-y, abstract: the ejected fluid
+exchanges its momentum mostly with the added mass during ejection, and that momentum is carried
+by the ring), so the deceleration does not take it back: the pulse's over-pressure impulse is
+``m_d u_peak`` (the impulsive start's ``(8/3) rho R^3 U`` of Krueger 2005).  Moslemi (2020,
+arXiv:2101.00075) finds by simulation an under-pressure during the deceleration of tube-nozzle
+jets and no net gain; this model follows the force-balance measurements instead
+(docs/theory/starting_jet.md, "Limits").
 
 *Pinch-off.*  The formation time of the current pulse, ``T* = int u_j / D dt`` (Gharib, Rambod &
 Shariff 1998, J. Fluid Mech. 360, 121: the stroke ratio L/D of a piston-cylinder; Dabiri & Gharib
