@@ -48,6 +48,11 @@ per unit area is ``j = kappa min(Q_end - min(Q_start, 0), 0)`` (taken only when 
 ``kappa = m_d / A^2`` with the outlet area at the step's start), added to the shell's residual
 as ``j grad V`` (a uniform cavity pressure ``p_ex = -j/dt``) and to the vehicle's as the thrust
 ``-A j/dt``.  ``min(Q_start, 0)``: the inflow's stopping is not the ring's start.
+
+*Cache.*  shell_kernels compiles these njit functions into its own cached kernels, and numba
+invalidates a cache entry when the caller's file changes, not this one: after changing the code
+here, clear ``pulsejet_sim/models/__pycache__/shell_kernels*.nb[ic]`` (as lumped_kernels says of
+base.py).
 """
 
 from __future__ import annotations
