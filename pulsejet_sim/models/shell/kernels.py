@@ -45,6 +45,7 @@ import math
 
 from numba import literally, njit
 import numpy as np
+from pulsejet_sim.models import starting_jet as sj
 
 # ---- flags (bitmask; compiled out only by advance_specialised via numba.literally) -----------
 F_VISC = 1
@@ -97,7 +98,9 @@ P_LAMBDA_DEFORMING = 33
 # length S, m, of that flow's momentum relative to the body, rho S V' along +z
 # (fluid.internal_flow_momentum: true, experiment K; 0: left out)
 P_SMOM = 34
-N_PARAMS = 35
+# the starting jet's formation number F (jet.starting_jet, models/starting_jet.py); 0: term off
+P_FORMATION_NUMBER = 35
+N_PARAMS = 36
 PULSE_HALF_COSINE, PULSE_TRIANGLE = 0.0, 1.0
 
 # ---- element table E[e, :] -------------------------------------------------------------------
@@ -128,7 +131,10 @@ S_CREATED_WALL = (
     18  # paper_code: work of the wall-borne thrust, refill force and drag beyond the books, J
 )
 S_CREATED_MOM = 19  # paper coupling, experiment K: work of the unreacted -rho S V'' on the body, J
-N_TAIL = 20
+# jet.starting_jet (models/starting_jet.py): the current pulse's formation time int u_j/D dt, and
+# the exit over-pressure's work that left with the jet (part of S_JET), J
+S_FORMATION_TIME, S_OVERPRESSURE_WORK = 20, 21
+N_TAIL = 22
 
 # ---- stats returned by the force evaluation -------------------------------------------------
 T_EEL, T_PVISC, T_PDRAG, T_VOL, T_VDOT, T_P, T_PACT, T_FRING, T_RMAX, T_PCONT = (
@@ -894,6 +900,19 @@ def rank_one_coefficient(flags, st, P, dt, inertia):
 
 
 @njit(cache=True, nogil=True)
+def starting_jet_impulse(Nd, qn, vn, vs, Us, U, body, dt, alpha, q_end, g_end, v1, kappa, q0):
+    """
+    jet.starting_jet: the step's exit over-pressure impulse per area ``j`` (Pa s, <= 0).
+
+    From the volume rates at the step's start ``q0`` and end (models/starting_jet.py); the
+    residual takes ``j grad V`` on the wall and ``A j`` on the vehicle's row (the thrust).
+    """
+    u_end = U + (Us - U) / alpha if body else 0.0
+    q1 = end_of_step_flow(Nd, qn, vn, vs, Us, u_end, dt, alpha, q_end, g_end, v1)
+    return sj.overpressure_impulse(kappa, q0, q1)
+
+
+@njit(cache=True, nogil=True)
 def _check(q, v, n1, P):
     for k in range(6 * n1):
         if not math.isfinite(q[k] if k < 3 * n1 else v[k - 3 * n1]):
@@ -1083,6 +1102,19 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                 q_start = flow_rate(Nd, g_end, vn, U if body else 0.0)
                 if deforming:
                     lam_start = inertance(qn, n1, g_lam)
+            # jet.starting_jet: the forming ring's exit over-pressure (models/starting_jet.py)
+            ring_kappa = 0.0
+            ring_q0 = 0.0
+            ring_area = 0.0
+            ring_j = 0.0
+            ring_pex = 0.0
+            if P[P_FORMATION_NUMBER] > 0.0 and sj.forming(
+                state[tail + S_FORMATION_TIME], P[P_FORMATION_NUMBER]
+            ):
+                ring_area = outlet_area(flags, qn, n1, P)
+                ring_kappa = sj.ring_inertance(P[P_RHO], ring_area)
+                volume_grad(qn, n1, g_end)
+                ring_q0 = flow_rate(Nd, g_end, vn, U if body else 0.0)
             fresh = False
             converged = False
             prev = 1e300
@@ -1152,6 +1184,15 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         for k in range(n):
                             if not fixed_dof(Nd, k) or (body and k == rz):
                                 R[k] -= dt * 0.5 * P[P_RHO] * q_mid * q_mid * g_lam[k]
+                if ring_kappa > 0.0:
+                    ring_j = starting_jet_impulse(
+                        Nd, qn, vn, vs, Us, U, body, dt, alpha, q_end, g_end, v1, ring_kappa,
+                        ring_q0,
+                    )
+                    for k in range(n):
+                        R[k] += ring_j * gf[k]
+                    if body:
+                        R[rz] += ring_area * ring_j  # the thrust A p_ex on the vehicle
                 state[tail + S_NIT] += 1.0
                 # backtracking line search on |R|: halve a Newton step that increased the residual
                 rnorm = 0.0
@@ -1175,7 +1216,8 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     band_solve(J, n, BW, wz, zz)
                 elif have_lu and (((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0):
                     # refresh the rank-one pressure correction for the reused factorisation
-                    pcoef = rank_one_coefficient(flags, st, P, dt, rho_lam_now / alpha)
+                    ring_c = ring_kappa if ring_j < 0.0 else 0.0  # starting jet's inertia
+                    pcoef = rank_one_coefficient(flags, st, P, dt, (rho_lam_now + ring_c) / alpha)
                     band_solve(J, n, BW, gf, zz)
                 if not have_lu:
                     fresh = True
@@ -1231,7 +1273,10 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                         pcoef = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
                         band_solve(J, n, BW, wz, zz)
                     elif ((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0:
-                        pcoef = rank_one_coefficient(flags, st, P, dt, rho_lam_now / alpha)
+                        ring_c = ring_kappa if ring_j < 0.0 else 0.0
+                        pcoef = rank_one_coefficient(
+                            flags, st, P, dt, (rho_lam_now + ring_c) / alpha
+                        )
                         band_solve(J, n, BW, gf, zz)
                     have_lu = True
                 band_solve(J, n, BW, R, dv)
@@ -1304,6 +1349,20 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
                     po -= 0.5 * P[P_RHO] * P[P_AIN] * uin_ * uin_ * uin_
             else:
                 acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
+                if ring_kappa > 0.0:
+                    # the converged step's exit over-pressure: on the vehicle A p_ex, and its work
+                    # A p_ex (u_j - U) out with the jet (the wall paid A p_ex u_j through grad V)
+                    ring_j = starting_jet_impulse(
+                        Nd, qn, vn, vs, Us, U, body, dt, alpha, q_end, g_end, v1, ring_kappa,
+                        ring_q0,
+                    )
+                    ring_pex = -ring_j / dt
+                    ring_out = ring_j * (st[T_VDOT] + ring_area * (Us if body else 0.0)) / dt
+                    thr += ring_area * ring_pex
+                    if body:
+                        acc_b += ring_area * ring_pex / mb
+                    pj += ring_out
+                    state[tail + S_OVERPRESSURE_WORK] += dt * ring_out
                 if flags & F_CODE:
                     # as in the paper coupling no cavity pressure pays for the jet; and the thrust,
                     # the refill force and the drag work at the wall's speed, not the vehicle's
@@ -1339,6 +1398,11 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             state[tail + S_JET] += dt * pj
             state[tail + S_OTHER] += dt * (po + st[T_PCONT])
             pres, vol, vdot = st[T_P], st[T_VOL], st[T_VDOT]
+            if P[P_FORMATION_NUMBER] > 0.0:
+                pres += ring_pex
+                state[tail + S_FORMATION_TIME] = sj.next_formation_time(
+                    state[tail + S_FORMATION_TIME], vdot, st[T_AOUT], dt
+                )
         if not (flags & F_BODY):
             U1 = 0.0
             Uh = 0.0

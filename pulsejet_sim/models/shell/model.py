@@ -129,7 +129,10 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
                  internal_flow_momentum: false (true: that flow's momentum rho S V' too)}
     jet:        {outlet: ring|edge|free_edge_fixed_nozzle, outlet_radius_m: ring/2 (not with edge),
                  inlet_area_m2: A_out + 3 pi (10 mm)^2,
-                 thrust_coefficient: 1}
+                 thrust_coefficient: 1,
+                 starting_jet: false (true: the forming vortex ring's exit over-pressure,
+                 models/starting_jet.py, docs/theory/starting_jet.md; consistent coupling and an
+                 implicit integrator only), formation_number: 4 (pinch-off's stroke ratio L/D)}
     vehicle:    {mass_kg (shell + payload), added_mass_kg: 0, initial_velocity_m_s: 0}
     actuation:  {kind: none|cable|muscle, source: routine|command (cable only),
                  amplitude (cable: peak total radial pull, N; muscle: fractional drop of the
@@ -167,6 +170,7 @@ from pulsejet_sim.core.model_io import Command, ModelError, Observation, Simulat
 from pulsejet_sim.core.schema import show
 from pulsejet_sim.models.shell import kernels as sk
 from pulsejet_sim.models.shell.geometry import build_profile, GEOMETRY_KINDS, Profile
+from pulsejet_sim.models.starting_jet import FORMATION_NUMBER, FORMATION_NUMBER_RANGE
 
 _KERNELS: dict = {}
 INTEGRATORS = {'verlet': (0, 1.0), 'implicit_midpoint': (1, 0.5), 'backward_euler': (1, 1.0)}
@@ -272,6 +276,36 @@ def _unknown(sec, where, allowed):
                 f'{where}.{show(k) if not isinstance(k, str) else k[:60]}: unknown key '
                 f'(value {show(sec[k])}); allowed: {", ".join(allowed)}'
             )
+
+
+def starting_jet_setting(jet, coupling, integrator, jet_on):
+    """
+    Return the formation number of ``jet.starting_jet`` (models/starting_jet.py), 0 when off.
+
+    ``starting_jet: true`` adds the forming vortex ring's exit over-pressure; ``formation_number``
+    (default 4, Gharib, Rambod & Shariff 1998) ends it at pinch-off.  The over-pressure must be
+    paid by the cavity wall and enters the implicit solve as an inertia, so the term needs the
+    consistent coupling and an implicit integrator.
+    """
+    on = jet.get('starting_jet', False)
+    if not isinstance(on, bool):
+        raise ModelError(f'jet.starting_jet: {on!r} is not a boolean; allowed: true or false')
+    if not on:
+        if 'formation_number' in jet:
+            raise ModelError(
+                f'jet.formation_number: {jet["formation_number"]!r} is not used without '
+                'jet.starting_jet: true; allowed: leave it out, or starting_jet: true'
+            )
+        return 0.0
+    if coupling != 'consistent' or integrator == 'verlet' or not jet_on:
+        raise ModelError(
+            f'jet.starting_jet: true is not available with coupling: {coupling}, integrator: '
+            f'{integrator}, terms.jet: {str(jet_on).lower()}; allowed: coupling consistent (the '
+            'cavity wall pays the over-pressure), an implicit integrator (the forming ring is an '
+            'inertia) and the jet on (or starting_jet: false)'
+        )
+    low, high = FORMATION_NUMBER_RANGE
+    return _num(jet, 'formation_number', 'jet', low, high, default=FORMATION_NUMBER)
 
 
 def muscle_shape(
@@ -500,7 +534,18 @@ class ShellModel:
             )
 
         jet = _section(scene, 'jet', required=terms['jet'])
-        _unknown(jet, 'jet', ('outlet', 'outlet_radius_m', 'inlet_area_m2', 'thrust_coefficient'))
+        _unknown(
+            jet,
+            'jet',
+            (
+                'outlet',
+                'outlet_radius_m',
+                'inlet_area_m2',
+                'thrust_coefficient',
+                'starting_jet',
+                'formation_number',
+            ),
+        )
         outlet = _choice(
             jet,
             'outlet',
@@ -556,6 +601,7 @@ class ShellModel:
                 momentum_length = dense.internal_momentum_length_m()
         A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01**2)
         Cf = _num(jet, 'thrust_coefficient', 'jet', 0.0, 2.0, default=1.0)
+        formation_number = starting_jet_setting(jet, coupling, integrator, terms['jet'])
 
         veh = _section(scene, 'vehicle', required=False)
         _unknown(veh, 'vehicle', ('mass_kg', 'added_mass_kg', 'initial_velocity_m_s'))
@@ -793,6 +839,7 @@ class ShellModel:
         P[sk.P_LAMBDA] = inertance
         P[sk.P_LAMBDA_DEFORMING] = float(internal_inertia == 'one_dimensional_deforming')
         P[sk.P_SMOM] = momentum_length
+        P[sk.P_FORMATION_NUMBER] = formation_number
         P[sk.P_TC] = tc
         P[sk.P_TR] = tr
         P[sk.P_DT] = dt
@@ -1121,6 +1168,9 @@ class ShellModel:
             led['stored_kinetic_internal_flow'] = kf
         if self.P[sk.P_SMOM] > 0.0 and not self.flags & sk.F_PAPER:
             led['stored_kinetic_internal_cross'] = kc
+        if self.P[sk.P_FORMATION_NUMBER] > 0.0:
+            # jet.starting_jet: the exit over-pressure's share of out_jet_kinetic (not an own flow)
+            led['jet_overpressure_work'] = float(T[sk.S_OVERPRESSURE_WORK])
         out = led['out_jet_kinetic'] + led['out_drag'] + led['out_viscous'] + led['out_other']
         created = 0.0
         if self.flags & sk.F_PAPER:
