@@ -2,6 +2,12 @@
 
 import os
 
+import pytest
+
+# the reliability campaigns' generators and checks assert the properties the fuzz tests run: give
+# their failures pytest's detailed assertion messages too
+pytest.register_assert_rewrite('benchmarks.reliability')
+
 
 def isolate_ros(monkeypatch, offset: int) -> int:
     """

@@ -14,13 +14,10 @@ Writes benchmarks/results/marker.md.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
-import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_common import header, write  # noqa: E402
-import numpy as np  # noqa: E402
+from benchmarks.common import header, write
+import numpy as np
 
 
 def main() -> None:

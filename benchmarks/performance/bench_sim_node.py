@@ -32,12 +32,11 @@ import subprocess
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from bench_common import append  # noqa: E402
-from live_common import cpu_seconds  # noqa: E402
-import numpy as np  # noqa: E402
-from pulsejet_sim.ros.node_params import ros_value  # noqa: E402
-import wake_floor  # noqa: E402
+from benchmarks.common import append
+from benchmarks.live import cpu_seconds
+from benchmarks.performance import wake_floor
+import numpy as np
+from pulsejet_sim.ros.node_params import ros_value
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / 'results' / 'sim_node.md'

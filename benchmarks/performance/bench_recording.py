@@ -34,12 +34,11 @@ import tempfile
 import threading
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import bench_common  # noqa: E402
-from pulsejet_sim import analysis  # noqa: E402
-from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.studies.runner import Drive, LEDGER_PERIOD_S, run_scene  # noqa: E402
+from benchmarks import common as bench_common
+from pulsejet_sim import analysis
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.runner import Drive, LEDGER_PERIOD_S, run_scene
 
 SCENES = ('shell_robot', 'pump_cycle')
 TARGET_RATIO = 0.7  # issue: `pulsejet run` at >= 0.7x the speed of the physics with observations

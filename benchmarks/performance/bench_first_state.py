@@ -1,7 +1,7 @@
 """
 Benchmark: wall time from starting a freshly `colcon build`-installed sim_node to its first state.
 
-    .venv/bin/python benchmarks/bench_first_state.py [--scenes pump_cycle shell_robot]
+    .venv/bin/python -m benchmarks.performance.bench_first_state [--scenes pump_cycle shell_robot]
                                                      [--repeats 3] [--keep WORKDIR]
 
 Copies the repository into a temporary colcon workspace (as test/test_colcon_build.py does) and
@@ -37,7 +37,7 @@ import tempfile
 import threading
 import time
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PACKAGE = 'pulsejet_sim'
 RESULTS = REPO / 'benchmarks' / 'results' / 'first_state.md'
 EXCLUDE = (
@@ -323,7 +323,8 @@ def main(argv=None) -> int:
             shutil.rmtree(root, ignore_errors=True)
 
     cli = argv if argv is not None else sys.argv[1:]
-    command = ' '.join(['.venv/bin/python', f'benchmarks/{Path(__file__).name}', *cli])
+    module = 'benchmarks.performance.bench_first_state'
+    command = ' '.join(['.venv/bin/python', '-m', module, *cli])
     lines = [
         (
             '# First state of a freshly installed sim_node: cold compile vs numba cache warmed at'
@@ -357,7 +358,6 @@ def main(argv=None) -> int:
         ),
         '|---|---|---|---|---|---|---|---|',
     ]
-    sys.path.insert(0, str(REPO))
     from pulsejet_sim.scene import load_scene_data
 
     for scene, cold, warm in rows:

@@ -53,10 +53,8 @@ for _var in ('NUMBA_NUM_THREADS', 'OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MK
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_common import cpu_model as _cpu_model  # noqa: E402
+from benchmarks.common import cpu_model as _cpu_model  # noqa: E402
 import numpy as np  # noqa: E402
 from pulsejet_sim.core.model_io import SimulationBlowUp  # noqa: E402
 from pulsejet_sim.engine.simulation import Simulation  # noqa: E402

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 import subprocess
 import sys
 import time
@@ -119,8 +118,7 @@ def main(argv=None) -> int:
             f' --spin-ms {args.spin_ms} between 0 and the period'
         )
     if args.table:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from bench_common import header, write
+        from benchmarks.common import header, write
 
         command = ' '.join(['python benchmarks/wake_floor.py'] + sys.argv[1:])
         write(
