@@ -97,6 +97,8 @@ def main(argv=None) -> int:
     ap.add_argument('--no-write', action='store_true')
     args = ap.parse_args(argv)
     code = args.code.resolve()
+    if not (code / 'pulsejet_sim' / '__init__.py').is_file():
+        ap.error(f'--code {args.code}: not a pulsejet checkout (no pulsejet_sim package there)')
     import pulsejet_sim
 
     if Path(pulsejet_sim.__file__).resolve().parents[1] != code:
