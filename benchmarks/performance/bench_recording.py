@@ -17,7 +17,8 @@ Prints a markdown table and writes benchmarks/results/recording.md (date, machin
 medians, the ratio physics/record of the medians). With --profile it adds the cProfile of one
 recorded run per scene (the functions with the most own time).
 
-    .venv/bin/python benchmarks/bench_recording.py [--repeats 7] [--duration 10] [--profile]
+    .venv/bin/python -m benchmarks.performance.bench_recording [--repeats 7] [--duration 10]
+        [--profile]
 """
 
 from __future__ import annotations
@@ -179,8 +180,8 @@ def main(argv=None) -> int:
                 profiles.append(profile_text(name, args.duration, out))
     text = bench_common.header(
         'Offline recording: `pulsejet run` against the same physics without recording',
-        'python benchmarks/bench_recording.py ' + ' '.join(argv if argv is not None
-                                                           else sys.argv[1:]),
+        'python -m benchmarks.performance.bench_recording '
+        + ' '.join(argv if argv is not None else sys.argv[1:]),
     )
     load_after = os.getloadavg()
     text += (
