@@ -15,7 +15,7 @@ from pathlib import Path
 import time
 
 from pulsejet_sim.core import topics
-from pulsejet_sim.ros.harness import default_domain_id, NodeProcess
+from pulsejet_sim.ros.launching import default_domain_id, NodeProcess
 
 
 def node_env(domain: int) -> dict:

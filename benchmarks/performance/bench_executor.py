@@ -20,8 +20,11 @@ import sys
 import time
 
 from benchmarks import common
-from benchmarks.live import node_env
-from pulsejet_sim.ros.harness import default_domain_id
+from pulsejet_sim.ros.launching import (
+    default_domain_id,
+    discover_localhost_only,
+    isolated_environment,
+)
 
 WARM_UP_S = 3.0
 CASES = [('single', False), ('events', False), ('single', True), ('events', True)]
@@ -111,7 +114,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not args.seconds > 0 or not args.rate_hz > 0:
         ap.error(f'--seconds {args.seconds} / --rate-hz {args.rate_hz}: both must be > 0')
-    env = node_env(default_domain_id())
+    env = isolated_environment(default_domain_id())
+    discover_localhost_only()  # this process's participant too
     env.pop('PULSEJET_EXECUTOR', None)
     rows = []
     for kind, raw in CASES:

@@ -37,6 +37,8 @@ import tempfile
 import threading
 import time
 
+from pulsejet_sim.ros.launching import default_domain_id, isolated_environment
+
 REPO = Path(__file__).resolve().parents[2]
 PACKAGE = 'pulsejet_sim'
 RESULTS = REPO / 'benchmarks' / 'results' / 'first_state.md'
@@ -108,11 +110,7 @@ def sourced_env(ws: Path, domain: int) -> dict:
     ).stdout.decode()
     env = dict(item.split('=', 1) for item in out.split('\0') if '=' in item)
     env.pop(BOOTSTRAP_GUARD, None)  # the console script re-executes itself like a user's would
-    env['ROS_DOMAIN_ID'] = str(domain)
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env['PYTHONUNBUFFERED'] = '1'
-    env['RCUTILS_LOGGING_BUFFERED_STREAM'] = '0'
-    return env
+    return isolated_environment(domain, base=env)
 
 
 def installed_cache_files(ws: Path) -> list[Path]:
@@ -281,7 +279,7 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
 
-    domain = 215 + os.getpid() % 18  # 215-232: isolated from the tests' 1-101
+    domain = default_domain_id()  # 215-232: isolated from the tests' 1-100
     started = _dt.datetime.now().astimezone()
     host = machine()
     root = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix='bench_first_state_'))

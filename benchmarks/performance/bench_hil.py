@@ -79,21 +79,19 @@ def run_rate(
     from pulsejet_sim.core.model_io import Command
     from pulsejet_sim.ros import messages
     from pulsejet_sim.ros.executor import make_executor
-    from pulsejet_sim.ros.harness import NodeProcess
+    from pulsejet_sim.ros.launching import (
+        discover_localhost_only,
+        isolated_environment,
+        NodeProcess,
+    )
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
-    env = dict(
-        os.environ,
-        ROS_DOMAIN_ID=str(domain),
-        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-        RCUTILS_LOGGING_BUFFERED_STREAM='0',
-        PYTHONUNBUFFERED='1',
-    )
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env = isolated_environment(domain)
+    discover_localhost_only()  # this process's participant too
     sim = NodeProcess(
         'pulsejet_sim.ros.sim_node',
         {
@@ -300,7 +298,7 @@ def main(argv=None) -> int:
     )
     ap.add_argument('--note', default='', help='a line added under the header of the results file')
     args = ap.parse_args(argv)
-    from pulsejet_sim.ros.harness import default_domain_id
+    from pulsejet_sim.ros.launching import default_domain_id
 
     domain = default_domain_id() if args.domain_id is None else args.domain_id
     results = []

@@ -36,16 +36,14 @@ import time
 
 
 from benchmarks import common
-from benchmarks.live import (
-    cpu_seconds,
-    default_domain_id,
-    LiveClient,
-    node_env,
-    NodeProcess,
-    ParamProbe,
-    rss_bytes,
-)
+from benchmarks.live import cpu_seconds, LiveClient, ParamProbe, rss_bytes
 from pulsejet_sim.core import topics
+from pulsejet_sim.ros.launching import (
+    default_domain_id,
+    discover_localhost_only,
+    isolated_environment,
+    NodeProcess,
+)
 
 WEIRD = (float('nan'), float('inf'), -float('inf'), 1e308, -1e308, -1.0, 5e-324, 0.0)
 SERVICE_TIMEOUT_S = 10.0
@@ -253,7 +251,8 @@ def restore(flood: Flood) -> None:
 def fuzz_scene(
     scene: str, seconds: float, rate_hz: float, seed: int, domain: int, log_dir: Path
 ) -> dict:
-    env = node_env(domain)
+    env = isolated_environment(domain)
+    discover_localhost_only()  # this process's participant too
     params = {
         'scene': scene,
         'pacing': 'real_time',

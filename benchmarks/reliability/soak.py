@@ -46,17 +46,14 @@ import time
 
 
 from benchmarks import common
-from benchmarks.live import (
-    cpu_seconds,
-    default_domain_id,
-    LiveClient,
-    node_env,
-    NodeProcess,
-    ParamProbe,
-    percentile,
-    rss_bytes,
-)
+from benchmarks.live import cpu_seconds, LiveClient, ParamProbe, percentile, rss_bytes
 from pulsejet_sim.core import topics
+from pulsejet_sim.ros.launching import (
+    default_domain_id,
+    discover_localhost_only,
+    isolated_environment,
+    NodeProcess,
+)
 
 RSS_PERIOD_S = 10.0
 CONTROLLERS = {
@@ -100,7 +97,8 @@ def soak(
     warm_up_s: float = 60.0,
     param_period_s: float = 1.0,
 ) -> dict:
-    env = node_env(domain)
+    env = isolated_environment(domain)
+    discover_localhost_only()  # this process's participant too
     procs = {
         'controller_node': NodeProcess(
             'pulsejet_ctrl.controller_node',

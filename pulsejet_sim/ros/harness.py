@@ -37,20 +37,21 @@ import dataclasses
 import math
 import os
 from pathlib import Path
-import signal
-import subprocess
 import tempfile
 import time
 from typing import Any, Callable
 
 from pulsejet_sim.core import topics as names
-from pulsejet_sim.ros.node_params import node_command
+from pulsejet_sim.ros.launching import (
+    default_domain_id,
+    discover_localhost_only,
+    isolated_environment,
+    NodeProcess,
+    STOP_TIMEOUT_S,
+)
 from pulsejet_sim.scene import DEFAULT_SCENE
 
-DOMAIN_BASE = 215  # 215-232: a range ROS documents as safe on Linux
-DOMAIN_SPAN = 18
 STARTUP_TIMEOUT_S = 90.0  # scene loading + JIT compilation of a cold cache
-STOP_TIMEOUT_S = 10.0
 SERVICE_TIMEOUT_S = 30.0
 SIM_NODE_NAME = '/sim_node'
 
@@ -85,50 +86,8 @@ class Diagnostic:
     wall_s: float
 
 
-def default_domain_id() -> int:
-    return DOMAIN_BASE + os.getpid() % DOMAIN_SPAN
-
-
 def _stamp_s(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
-
-
-class NodeProcess:
-    """One node as `python -m module --ros-args -p k:=v ...`, output to a log file."""
-
-    def __init__(self, module: str, params: dict, log_path: Path, env: dict):
-        self.module = module
-        self.log_path = log_path
-        args = node_command(module, params)
-        self._log = open(log_path, 'wb')
-        self.proc = subprocess.Popen(
-            args, stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env
-        )
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def output(self) -> str:
-        try:
-            return self.log_path.read_text(errors='replace')
-        except OSError:
-            return ''
-
-    def stop(self, timeout_s: float = STOP_TIMEOUT_S, sig=signal.SIGINT) -> int:
-        if self.proc.poll() is None:
-            try:
-                self.proc.send_signal(sig)
-                self.proc.wait(timeout=timeout_s)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if not self._log.closed:
-            self._log.close()
-        return self.proc.returncode
 
 
 class SimHarness:
@@ -199,13 +158,7 @@ class SimHarness:
         self.close()
 
     def environment(self) -> dict:
-        env = dict(os.environ)
-        env['ROS_DOMAIN_ID'] = str(self.domain_id)
-        env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        env['RCUTILS_LOGGING_BUFFERED_STREAM'] = '0'
-        env['RCUTILS_COLORIZED_OUTPUT'] = '0'
-        env['PYTHONUNBUFFERED'] = '1'
-        return env
+        return isolated_environment(self.domain_id)
 
     def start(self) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
@@ -220,8 +173,7 @@ class SimHarness:
         from std_srvs.srv import SetBool, Trigger
 
         env = self.environment()
-        # this process's participant: the same isolation as the children
-        os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+        discover_localhost_only(override=False)  # this process's participant, as the children
         sim_params = {'scene': self.scene, 'pacing': self.pacing}
         sim_params.update(self.parameters)
         if isinstance(sim_params.get('scene_overrides'), dict):
