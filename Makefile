@@ -27,7 +27,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q $(PYTEST_ARGS)
 
 bench: $(STAMP)
-	$(PY) benchmarks/bench_lumped.py
+	$(PY) -m benchmarks.performance.bench_lumped
 
 clean:
 	rm -rf $(VENV) build install log runs

@@ -180,7 +180,7 @@ if develop is not None:
 setup(
     name=PACKAGE,
     version='0.1.0',
-    packages=find_packages(exclude=['test', 'benchmarks']),
+    packages=find_packages(exclude=['test', 'benchmarks', 'benchmarks.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),

@@ -43,13 +43,11 @@ from pathlib import Path
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from pulsejet_sim.studies.optimize import (  # noqa: E402
+from pulsejet_sim.studies.optimize import (
     differential_evolution, routine_run, scene_mapping
 )
-from pulsejet_sim.studies.sweep import executor_label, open_executor, SweepError  # noqa: E402
-import yaml  # noqa: E402
+from pulsejet_sim.studies.sweep import executor_label, open_executor, SweepError
+import yaml
 
 #: routine field -> (low, high): the searched box
 BOUNDS = {

@@ -22,6 +22,7 @@ import subprocess
 import sys
 import time
 
+from pulsejet_sim.ros.launching import isolated_environment, pick_domain_id
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
@@ -50,12 +51,7 @@ def colcon_command() -> list[str]:
 
 
 def ros_env(offset: int) -> dict:
-    env = dict(os.environ)
-    env['ROS_DOMAIN_ID'] = str(1 + (os.getpid() + offset) % 100)
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env['RCUTILS_LOGGING_BUFFERED_STREAM'] = '0'
-    env['RCUTILS_COLORIZED_OUTPUT'] = '0'
-    env['PYTHONUNBUFFERED'] = '1'
+    env = isolated_environment(pick_domain_id(offset))
     # the build must not see the editable install's source tree through a stale PYTHONPATH
     env.pop('PYTHONPATH', None)
     env.pop('AMENT_PREFIX_PATH', None)

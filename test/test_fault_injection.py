@@ -66,7 +66,7 @@ def test_a_restarted_sim_node_is_picked_up_by_the_controller_and_the_recorder(
     sim_node killed hard mid-run and started again: controller_node (time went back: its routine
     restarts) and an in-process recorder go on without a restart; the recording holds both runs.
     """
-    from pulsejet_sim.ros.harness import NodeProcess
+    from pulsejet_sim.ros.launching import NodeProcess
     from pulsejet_sim.ros.recorder import Recorder
     from test_recorder import read_all
 

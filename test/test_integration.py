@@ -19,6 +19,7 @@ import time
 
 from conftest import isolate_ros
 import numpy as np
+from pulsejet_sim.ros.launching import isolated_environment, pick_domain_id
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
@@ -212,8 +213,7 @@ def test_sim_and_controller_swim_recorded_to_mcap(tmp_path):
 def test_demo_end_to_end(ros_domain, tmp_path):
     """`python -m pulsejet_sim.ros.demo`: processes, recording, summary and plot, exit 0."""
     out = tmp_path / 'demo.mcap'
-    env = dict(os.environ)
-    env['ROS_DOMAIN_ID'] = str(1 + (os.getpid() + DOMAIN_OFFSET + 1) % 100)
+    env = isolated_environment(pick_domain_id(DOMAIN_OFFSET + 1))
     proc = subprocess.Popen(
         [
             sys.executable,

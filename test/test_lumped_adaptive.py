@@ -81,9 +81,9 @@ def test_a_closing_valve_seals_at_its_seat_instead_of_faulting(overrides):
 
     Found by the live fuzz: from 0.50001 the fixed-step stroke (2e-3 per step) left the valve at
     1e-5 for one step, where the orifice loss made the nozzle flow too stiff and the model faulted
-    (20 of 21 runs of benchmarks/valve_seat_probe.py). The valve's opening is always 0 or at least
-    its seat (VALVE_MIN_OPENING): a closing valve seals when its stroke would pass below the
-    seat, a shut one cracks open to it.
+    (20 of 21 runs of benchmarks/validation/valve_seat_probe.py). The valve's opening is always
+    0 or at least its seat (VALVE_MIN_OPENING): a closing valve seals when its stroke would pass
+    below the seat, a shut one cracks open to it.
     """
     model = load_scene('pump_cycle', overrides).model
     stroke = model.params[K.P_VALVE_RATE] * model.dt_s

@@ -1,9 +1,9 @@
 """Physics of the lumped model (paper 001): each test states the figure it checks and prints it."""
 
-import importlib.util
 import math
 from pathlib import Path
 
+from benchmarks.validation import paper001_section41 as section41_table
 import numpy as np
 from pulsejet_sim.core.model_io import Command
 from pulsejet_sim.engine.simulation import Simulation
@@ -202,7 +202,6 @@ def test_closure_error_shrinks_at_the_integrator_order(coupling, duration_s):
 # A claim the model reproduces is asserted with a stated tolerance; a claim it does not reproduce
 # is asserted as what the model does, with the measured number in the message.
 
-BENCH = Path(__file__).resolve().parent.parent / 'benchmarks' / 'paper001_section41.py'
 STORED = (
     Path(__file__).resolve().parent.parent / 'benchmarks' / 'results' / 'paper001_section41.md'
 )
@@ -326,12 +325,9 @@ def _assert_stored_rows_match(reading_id, figures_by_coupling):
 
     Every cell but the closure error (round-off) and the dt/2 column is compared.
     """
-    spec = importlib.util.spec_from_file_location('paper001_section41', BENCH)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
     closures = []
     for coupling, figures in figures_by_coupling.items():
-        cells = bench.row_cells(reading_id, coupling, figures)
+        cells = section41_table.row_cells(reading_id, coupling, figures)
         prefix = f'| {reading_id} | `{coupling}` |'
         stored = [line for line in _stored_rows() if line.startswith(prefix)]
         assert len(stored) == 1, stored
@@ -441,7 +437,7 @@ def test_reading_g_is_refused_by_the_batch_kernel():
 
 
 def test_stored_reading_g_rows_match_a_rerun(section41_shell_nozzle):
-    """Reading G's rows of the stored table, rerun now (benchmarks/paper001_section41.py)."""
+    """Reading G's rows of the stored table, rerun now (validation/paper001_section41)."""
     assert len(_assert_stored_rows_match('G', section41_shell_nozzle)) == 2
 
 

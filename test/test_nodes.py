@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 import signal
 import subprocess
 import sys
@@ -16,7 +15,7 @@ import time
 
 from conftest import isolate_ros
 import numpy as np
-from pulsejet_sim.ros.node_params import node_command
+from pulsejet_sim.ros.launching import NodeProcess
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
@@ -40,39 +39,6 @@ def ros_domain(monkeypatch):
     return isolate_ros(monkeypatch, DOMAIN_OFFSET)
 
 
-class NodeProcess:
-    """A node started as `python -m module --ros-args -p ...`, output in a file."""
-
-    def __init__(self, module: str, params: dict, log_path: Path):
-        self.log_path = log_path
-        args = node_command(module, params)
-        self._log = open(log_path, 'wb')
-        self.proc = subprocess.Popen(
-            args,
-            stdout=self._log,
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-            env=dict(os.environ),
-        )
-
-    def output(self) -> str:
-        return self.log_path.read_text(errors='replace')
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def stop(self, sig=signal.SIGINT, timeout=10.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self._log.close()
-        return self.proc.returncode
-
-
 @pytest.fixture
 def start_node(ros_domain, tmp_path):
     started = []
@@ -80,13 +46,14 @@ def start_node(ros_domain, tmp_path):
     def start(module='pulsejet_sim.ros.sim_node', **params):
         # these tests exercise the pump/valve vehicle; the nodes' default scene is the shell robot
         params.setdefault('scene', 'pump_cycle')
-        p = NodeProcess(module, params, tmp_path / f'{module}.{len(started)}.log')
+        log_path = tmp_path / f'{module}.{len(started)}.log'
+        p = NodeProcess(module, params, log_path, dict(os.environ))
         started.append(p)
         return p
 
     yield start
     for p in started:
-        p.stop(timeout=5.0)
+        p.stop(timeout_s=5.0)
 
 
 class Probe:
@@ -342,7 +309,7 @@ def test_start_up_objects_are_frozen_before_the_node_starts(ros_domain):
 def test_clean_shutdown_on_signal(start_node, probe, sig):
     sim = start_node()
     wait_running(probe, sim, 0.1)
-    code = sim.stop(sig, timeout=10.0)  # a node that does not exit fails here
+    code = sim.stop(timeout_s=10.0, sig=sig)  # a node that does not exit fails here
     assert code == 0, f'exit code {code} on {sig.name}:\n{sim.output()[-3000:]}'
     assert 'Traceback' not in sim.output(), sim.output()[-3000:]
 

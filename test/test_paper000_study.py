@@ -1,34 +1,18 @@
 """
 Paper 000's study: a rerun case matches its row; the stored tables give the verdicts.
 
-Paper 000's study (benchmarks/paper000_study.py, ~15 min, not run here): one full case is rerun and
-must match its stored row bit for bit; the stored tables give the verdicts that
+Paper 000's study (benchmarks/validation/paper000_study.py, ~15 min, not run here): one full case
+is rerun and must match its stored row bit for bit; the stored tables give the verdicts that
 docs/PHYSICS_SHELL.md reports, in each coupling.
 """
 
-import importlib.util
 import math
-from pathlib import Path
-import sys
 
+from benchmarks.validation import paper000_study as study
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.studies.sweep import load_sweep, run_one
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def load_benchmark(name):
-    """Import benchmarks/<name>.py (not a package) as a module."""
-    spec = importlib.util.spec_from_file_location(name, ROOT / 'benchmarks' / f'{name}.py')
-    module = importlib.util.module_from_spec(spec)
-    # a dataclass with postponed annotations looks its module up in sys.modules
-    sys.modules.setdefault(name, module)
-    spec.loader.exec_module(module)
-    return module
-
-
-study = load_benchmark('paper000_study')
 STORED = study.read_table(study.OUT / 'study.csv')
 REFINED = study.read_table(study.OUT / 'refined.csv')
 RERUN = ('internal/paper/cone/E80k/T0.66', 'external/consistent/ellipsoid/E80k/T0.53/falling')
@@ -110,7 +94,8 @@ def test_the_study_wall_cannot_resonate_at_the_routines_frequencies():
     tenth of it, it swings at the membrane hoop mode sqrt(2 h E / R^2 / m) / 2 pi (m: the wall
     and its added water per area), over three times the fastest study routine (1.89 Hz).
     """
-    breathing = load_benchmark('paper000_breathing')
+    from benchmarks.validation import paper000_breathing as breathing
+
     _, runs = load_sweep(study.SWEEP)
     spec = next(r for r in runs if r.name == 'internal/paper/ellipsoid/E20k/T0.66')
     damped = breathing.free_response(spec, 500.0, refined=False)
@@ -142,7 +127,8 @@ def test_the_cones_routine_spread_is_a_lagging_walls_stroke_rate():
     3 eta / E (within 0.02), its peak speed spreads by more than 1.4 (the routine's rate 1.49
     times that ratio and a rest of 1.1-1.15), and every peak falls in the run's last period.
     """
-    routines = load_benchmark('paper000_routines')
+    from benchmarks.validation import paper000_routines as routines
+
     cycles = routines.read_cycles()
     _, runs = load_sweep(study.SWEEP)
     name = 'internal/paper/cone/E20k/T0.53'
@@ -169,7 +155,8 @@ def rerun_one_case_of(key, name):
     The rerun must match its stored row bit for bit, and the refined table must hold the same runs.
     Returns the experiments module, the stored and refined rows and the study's run specs.
     """
-    experiments = load_benchmark('paper000_experiments')
+    from benchmarks.validation import paper000_experiments as experiments
+
     tables = study.OUT / 'experiments_v2'
     stored = study.read_table(tables / f'{key}.csv')
     refined = study.read_table(tables / f'{key}_refined.csv')

@@ -6,7 +6,6 @@ It is fed by a publisher node here.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 import signal
 import subprocess
@@ -15,6 +14,7 @@ import time
 
 from pulsejet_sim.core.model_io import Command, Observation
 from pulsejet_sim.ros import messages
+from pulsejet_sim.ros.launching import isolated_environment, pick_domain_id
 from pulsejet_sim.ros.recorder import parse_topics, Recorder
 import pytest
 import rclpy
@@ -32,9 +32,10 @@ def domain_id(offset: int) -> int:
     """
     Return a ROS domain id, 1..100, different per test run (pid) and per test (offset).
 
-    So parallel runs do not cross-talk.
+    So parallel runs do not cross-talk (offsets 10-17 of pulsejet_sim.ros.launching's: no other
+    test file takes them).
     """
-    return 1 + (os.getpid() * 3 + offset) % 100
+    return pick_domain_id(10 + offset)
 
 
 def observation(i: int) -> Observation:
@@ -132,7 +133,7 @@ def start_recorder(
     tmp_path: Path, domain: int, topics: list[str] | None = None
 ) -> tuple[subprocess.Popen, Path]:
     out = tmp_path / 'rec.mcap'
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    env = isolated_environment(domain)
     args = [sys.executable, '-m', 'pulsejet_sim.ros.recorder']
     args += ['--ros-args', '-p', f'output:={out}']
     if topics is not None:
@@ -389,7 +390,7 @@ def test_sim_node_waiting_for_every_topic_gives_a_recording_from_t0(
     from pulsejet_sim.ros.node_params import node_command
 
     domain = domain_id(5)
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    env = isolated_environment(domain)
     sim_log = tmp_path / 'sim_node.log'
     with open(sim_log, 'wb') as log:
         sim = subprocess.Popen(

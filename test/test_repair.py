@@ -18,9 +18,9 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
-import textwrap
 import time
 
+from benchmarks.reliability.killed_writer import channel_metadata, FLUSH_S, start_writer
 from mcap.reader import make_reader
 from pulsejet_sim.bag.reader import bag_info, BagReadError, read_metadata
 from pulsejet_sim.bag.repair import repair_file
@@ -29,59 +29,6 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader
 
 REPO = Path(__file__).resolve().parents[1]
-FLUSH_S = 0.25
-
-WRITER = textwrap.dedent("""
-    import sys, time
-    from rclpy.serialization import serialize_message
-    from std_msgs.msg import Float64
-    from rosgraph_msgs.msg import Clock
-    from pulsejet_sim.bag.writer import BagWriter, qos_profiles_yaml
-    from pulsejet_sim.ros.messages import reliable_qos
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    path, mode, flush = sys.argv[1], sys.argv[2], float(sys.argv[3])
-    # chunks close by age only
-    bag = BagWriter(path, chunk_size_bytes=1 << 20, flush_period_s=flush)
-    bag.add_metadata('pulsejet', {'scene': 'escape', 'note': 'killed on purpose'})
-    bag.add_topic(
-        'pulsejet/volume', 'std_msgs/msg/Float64',
-        qos_profiles_yaml([reliable_qos('pulsejet/volume', 1000)]),
-    )
-    # a best-effort clock publisher (as a bag player's)
-    bag.add_topic(
-        '/clock', 'rosgraph_msgs/msg/Clock',
-        qos_profiles_yaml([QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)]),
-    )
-    i = 0
-    while True:
-        # system-wide clock: the parent compares it with its kill time
-        now = time.monotonic()
-        bag.write('pulsejet/volume', serialize_message(Float64(data=now)), 1_000_000 * i)
-        if i % 10 == 0:
-            bag.write('/clock', serialize_message(Clock()), 1_000_000 * i)
-        i += 1
-        if i == 500:
-            print('ready', flush=True)
-        if mode == 'idle' and i >= 1000:
-            print('idle', flush=True)
-            time.sleep(3600)
-        time.sleep(0.0005)
-""")
-
-
-def start_writer(tmp_path: Path, mode: str) -> tuple[subprocess.Popen, Path]:
-    path = tmp_path / 'killed.mcap'
-    script = tmp_path / 'writer.py'
-    script.write_text(WRITER)
-    proc = subprocess.Popen(
-        [sys.executable, str(script), str(path), mode, str(FLUSH_S)],
-        cwd=REPO,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stdout.readline().strip() == 'ready', proc.stderr.read()
-    return proc, path
 
 
 def pulsejet(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
@@ -92,12 +39,6 @@ def pulsejet(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
         text=True,
         timeout=timeout,
     )
-
-
-def channel_metadata(path: Path) -> dict[str, dict[str, str]]:
-    with open(path, 'rb') as fh:
-        summary = make_reader(fh).get_summary()
-    return {c.topic: dict(c.metadata) for c in summary.channels.values()}
 
 
 @pytest.mark.timeout(60)

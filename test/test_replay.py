@@ -6,7 +6,6 @@ Listened to from this process; plus the schedule and parameter checks without DD
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 import re
 import signal
@@ -18,6 +17,7 @@ import time
 from geometry_msgs.msg import TwistStamped
 import numpy as np
 from pulsejet_sim.bag import BagInfo, BagWriter, iter_bag
+from pulsejet_sim.ros.launching import isolated_environment, pick_domain_id
 from pulsejet_sim.ros.replay import (
     build_schedule,
     check_config,
@@ -40,8 +40,12 @@ RATE = 2.0
 
 
 def domain_id(offset: int) -> int:
-    """101..200 (other test files use 1..100), different per run (pid) and per test (offset)."""
-    return 101 + (os.getpid() * 7 + offset) % 100
+    """
+    Return a ROS domain id, 1..100, different per test run (pid) and per test (offset).
+
+    Offsets 20-23 of pulsejet_sim.ros.launching's (no other test file takes them).
+    """
+    return pick_domain_id(20 + offset)
 
 
 def stamp_s(stamp) -> float:
@@ -121,7 +125,7 @@ class Listener:
 
 
 def start_replay(domain: int, *params: str) -> subprocess.Popen:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    env = isolated_environment(domain)
     args = [sys.executable, '-m', 'pulsejet_sim.ros.replay', '--ros-args']
     for p in params:
         args += ['-p', p]

@@ -11,7 +11,6 @@ Each test runs sim_node as a process in a ROS domain in 201..232 derived from th
 from __future__ import annotations
 
 import math
-import os
 import time
 
 import pytest
@@ -19,6 +18,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 from pulsejet_sim.core.model_io import Command  # noqa: E402, I100
 from pulsejet_sim.ros.harness import HarnessError, SimHarness  # noqa: E402
+from pulsejet_sim.ros.launching import HARNESS_DOMAINS, pick_domain_id  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
 OK, WARN, ERROR = 0, 1, 2
@@ -26,7 +26,8 @@ OK, WARN, ERROR = 0, 1, 2
 
 @pytest.fixture
 def domain():
-    return 201 + os.getpid() % 32
+    # of the harness's range (215-232), beside SimHarness's own default (offset 0)
+    return pick_domain_id(9, HARNESS_DOMAINS)
 
 
 def sim_now_s(node) -> float:
@@ -365,9 +366,9 @@ def test_harness_reports_a_failed_start(domain, tmp_path):
     ids=['pacing', 'watchdog', 'overrides', 'executor'],
 )
 def test_bad_start_up_parameter_exits_2_with_the_reason(domain, tmp_path, param, value, expected):
-    from pulsejet_sim.ros.harness import NodeProcess
+    from pulsejet_sim.ros.launching import isolated_environment, NodeProcess
 
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    env = isolated_environment(domain)
     p = NodeProcess('pulsejet_sim.ros.sim_node', {param: value}, tmp_path / 'sim.log', env)
     p.proc.wait(timeout=50)
     assert p.stop() == 2 and expected in p.output(), p.output()[-2000:]

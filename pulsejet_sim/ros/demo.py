@@ -21,6 +21,7 @@ import sys
 import time
 
 from pulsejet_sim.core.topics import TOPIC_CLOCK
+from pulsejet_sim.ros.launching import pick_domain_id
 from pulsejet_sim.ros.node_params import node_command
 from pulsejet_sim.scene import DEFAULT_SCENE
 
@@ -41,7 +42,7 @@ def demo_environment(env=None) -> dict:
     """Copy of the environment with an isolated domain and localhost discovery."""
     env = dict(os.environ if env is None else env)
     if not env.get('ROS_DOMAIN_ID'):
-        env['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
+        env['ROS_DOMAIN_ID'] = str(pick_domain_id())
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
     env['RCUTILS_LOGGING_BUFFERED_STREAM'] = '0'

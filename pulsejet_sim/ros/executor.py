@@ -4,7 +4,7 @@ The executor the pulsejet processes spin.
 rclpy's `EventsExecutor` (rclpy.experimental, in Jazzy's rclpy since 7.1) where this rclpy has
 it, else `SingleThreadedExecutor`. The events executor takes each message from a queue the
 middleware fills instead of rebuilding a wait set per callback: on a 1 kHz /clock subscription it
-costs about a third of the CPU (benchmarks/bench_executor.py, results in
+costs about a third of the CPU (benchmarks/performance/bench_executor.py, results in
 benchmarks/results/executor.md). On a 2-core machine that runs sim_node, a controller and a
 recorder at 1 kHz this is the difference between a machine with headroom and one that drops
 simulated time. It raises a callback's exception from spin_once, as the single-threaded
@@ -18,14 +18,14 @@ clock's own updates instead (a jump callback per /clock). Nor does it pass a sub
 message info (a two-argument callback raises SystemError), which the recorder's send times need.
 
 sim_node keeps the single-threaded executor by default. The events executor serves events in
-arrival order, so under a flood of commands beyond the node's capacity (benchmarks/live_fuzz.py,
-1.9 kHz of commands into the shell scene) a parameter or service request waited behind every
-queued message event: parameter dumps took up to 21 s (4 of 125 over 10 s;
-benchmarks/results/live_fuzz_events_executor.md), against at most 0.63 s with the single-threaded
-executor (live_fuzz.md), whose wait set takes each ready entity in turn. sim_node's parameter
-`executor:=events` trades that for speed: it halves the median command-to-state latency of a 1 kHz
-closed loop (benchmarks/results/hil.md), what hardware in the loop wants. The controller and the
-recorder, which take the 1 kHz state, use the events executor.
+arrival order, so under a flood of commands beyond the node's capacity
+(benchmarks/reliability/live_fuzz.py, 1.9 kHz of commands into the shell scene) a parameter or
+service request waited behind every queued message event: parameter dumps took up to 21 s (4 of 125
+over 10 s; benchmarks/results/live_fuzz_events_executor.md), against at most 0.63 s with the
+single-threaded executor (live_fuzz.md), whose wait set takes each ready entity in turn. sim_node's
+parameter `executor:=events` trades that for speed: it halves the median command-to-state latency
+of a 1 kHz closed loop (benchmarks/results/hil.md), what hardware in the loop wants. The controller
+and the recorder, which take the 1 kHz state, use the events executor.
 
 `PULSEJET_EXECUTOR=single` selects the single-threaded executor everywhere but in a sim_node given
 `executor:=events` (e.g. to rule the events executor out when chasing a bug).

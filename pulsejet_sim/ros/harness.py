@@ -16,10 +16,12 @@ The processes run in an isolated DDS domain.
 
 `SimHarness` starts `python -m pulsejet_sim.ros.sim_node` (and `pulsejet_ctrl.controller_node` with
 `controller=True`) as subprocesses in their own ROS domain (`domain_id`, default 215 + pid % 18,
-unless given) with localhost-only discovery, and talks to them from its own rclpy context and node
-(never the global one): state subscriptions (`latest`, `states`, `wait_for`), command publishers
-(`send`), the pulsejet/pause|step|reset services, the real parameter services of /sim_node
-(`set_parameters`, `get_parameters`) and /diagnostics (`diagnostics`, `wait_for_diagnostics`).
+unless given) with localhost-only discovery (pulsejet_sim.ros.launching), and talks to them from
+its own rclpy context and node (never the global one; pulsejet_sim.ros.client_node): state
+subscriptions (`latest`, `states`, `wait_for`; pulsejet_sim.ros.state_listener), command
+publishers (`send`), the pulsejet/pause|step|reset services, the real parameter services of
+/sim_node (`set_parameters`, `get_parameters`; pulsejet_sim.ros.sim_controls) and /diagnostics
+(`diagnostics_received`, `wait_for_diagnostics`).
 Leaving the `with` block (also on an exception) stops the processes (SIGINT, then SIGKILL after
 `stop_timeout_s`) and shuts the context down; `exit_codes` then holds their return codes.
 The processes' output goes to `log_dir` (a temporary directory by default); `output()` reads it.
@@ -32,27 +34,28 @@ distinct `domain_id`s (the default is per process). `reset()` makes the time go 
 
 from __future__ import annotations
 
-import collections
-import dataclasses
-import math
 import os
 from pathlib import Path
-import signal
-import subprocess
 import tempfile
 import time
-from typing import Any, Callable
+from typing import Callable
 
-from pulsejet_sim.core import topics as names
-from pulsejet_sim.ros.node_params import node_command
+from pulsejet_sim.ros.client_node import ClientNode
+from pulsejet_sim.ros.launching import (
+    default_domain_id,
+    discover_localhost_only,
+    isolated_environment,
+    NodeProcess,
+    STOP_TIMEOUT_S,
+)
+from pulsejet_sim.ros.sim_controls import SIM_NODE_NAME, SimControls
+from pulsejet_sim.ros.state_listener import Diagnostic, SimState, StateListener
 from pulsejet_sim.scene import DEFAULT_SCENE
 
-DOMAIN_BASE = 215  # 215-232: a range ROS documents as safe on Linux
-DOMAIN_SPAN = 18
 STARTUP_TIMEOUT_S = 90.0  # scene loading + JIT compilation of a cold cache
-STOP_TIMEOUT_S = 10.0
 SERVICE_TIMEOUT_S = 30.0
-SIM_NODE_NAME = '/sim_node'
+
+__all__ = ['Diagnostic', 'HarnessError', 'SimHarness', 'SimState']
 
 
 class HarnessError(RuntimeError):
@@ -63,72 +66,17 @@ class HarnessError(RuntimeError):
     """
 
 
-@dataclasses.dataclass(frozen=True)
-class SimState:
-    """One published state of the simulator (SI units), built when its /clock sample arrives."""
+def sim_node_parameters(scene: str, pacing: str, parameters: dict) -> dict:
+    """Return sim_node's parameters: scene, pacing, the others; scene_overrides given as YAML."""
+    params = {'scene': scene, 'pacing': pacing}
+    params.update(parameters)
+    if isinstance(params.get('scene_overrides'), dict):
+        import yaml
 
-    time_s: float
-    velocity_m_s: float
-    volume_m3: float
-    mantle_radius_m: float
-    thrust_n: float
-    fluid_mass_kg: float
-    wall_s: float  # time.monotonic() when it was received
-
-
-@dataclasses.dataclass(frozen=True)
-class Diagnostic:
-    level: int  # diagnostic_msgs/DiagnosticStatus OK=0, WARN=1, ERROR=2
-    message: str
-    values: dict
-    time_s: float
-    wall_s: float
-
-
-def default_domain_id() -> int:
-    return DOMAIN_BASE + os.getpid() % DOMAIN_SPAN
-
-
-def _stamp_s(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-class NodeProcess:
-    """One node as `python -m module --ros-args -p k:=v ...`, output to a log file."""
-
-    def __init__(self, module: str, params: dict, log_path: Path, env: dict):
-        self.module = module
-        self.log_path = log_path
-        args = node_command(module, params)
-        self._log = open(log_path, 'wb')
-        self.proc = subprocess.Popen(
-            args, stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env
-        )
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def output(self) -> str:
-        try:
-            return self.log_path.read_text(errors='replace')
-        except OSError:
-            return ''
-
-    def stop(self, timeout_s: float = STOP_TIMEOUT_S, sig=signal.SIGINT) -> int:
-        if self.proc.poll() is None:
-            try:
-                self.proc.send_signal(sig)
-                self.proc.wait(timeout=timeout_s)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if not self._log.closed:
-            self._log.close()
-        return self.proc.returncode
+        params['scene_overrides'] = yaml.safe_dump(
+            params['scene_overrides'], default_flow_style=True
+        ).strip()
+    return params
 
 
 class SimHarness:
@@ -142,6 +90,10 @@ class SimHarness:
         shared).
     domain_id: ROS domain (default 215 + pid % 18); discovery is localhost only.
     wait_started: on entering, wait until the services answer and a first state arrived.
+
+    The parts: the node processes (launching.NodeProcess), the client node (ClientNode: spin,
+    spin_until, call), the state subscriptions (StateListener: states, applied, diagnostics) and
+    the command publishers and service clients (SimControls).
     """
 
     def __init__(
@@ -173,16 +125,12 @@ class SimHarness:
         self.startup_timeout_s = startup_timeout_s
         self.stop_timeout_s = stop_timeout_s
         self.wait_started = wait_started
+        self.history = history
         self.processes: dict[str, NodeProcess] = {}
         self.exit_codes: dict[str, int] = {}
-        self.states: collections.deque[SimState] = collections.deque(maxlen=history)
-        self.diagnostics_received: collections.deque[Diagnostic] = collections.deque(maxlen=1000)
-        self.applied: collections.deque[tuple[float, Any, float]] = collections.deque(
-            maxlen=history
-        )
-        self.context = self.node = self.executor = None
-        self._values: dict[str, float] = {}
-        self._received = 0  # states received in total
+        self.client: ClientNode | None = None
+        self.listener: StateListener | None = None
+        self.controls: SimControls | None = None
         self._closed = False
 
     # -- life cycle -----------------------------------------------------------------------------
@@ -199,37 +147,23 @@ class SimHarness:
         self.close()
 
     def environment(self) -> dict:
-        env = dict(os.environ)
-        env['ROS_DOMAIN_ID'] = str(self.domain_id)
-        env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        env['RCUTILS_LOGGING_BUFFERED_STREAM'] = '0'
-        env['RCUTILS_COLORIZED_OUTPUT'] = '0'
-        env['PYTHONUNBUFFERED'] = '1'
-        return env
+        return isolated_environment(self.domain_id)
 
     def start(self) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import TwistStamped, WrenchStamped
-        from pulsejet_sim.ros.executor import make_executor
-        from rcl_interfaces.srv import GetParameters, SetParameters
-        import rclpy
         from rclpy.qos import QoSProfile, ReliabilityPolicy
-        from rosgraph_msgs.msg import Clock
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64
-        from std_srvs.srv import SetBool, Trigger
 
+        self.start_processes()
+        discover_localhost_only(override=False)  # this process's participant, as the children
+        self.client = ClientNode(f'sim_harness_{os.getpid()}', self.domain_id)
+        self.qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        self.listener = StateListener(self.node, self.qos, self.history)
+        self.controls = SimControls(self.node, self.qos)
+        if self.wait_started:
+            self.wait_until_started()
+
+    def start_processes(self) -> None:
+        """Start controller_node (if asked) and sim_node, each logging to log_dir."""
         env = self.environment()
-        # this process's participant: the same isolation as the children
-        os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-        sim_params = {'scene': self.scene, 'pacing': self.pacing}
-        sim_params.update(self.parameters)
-        if isinstance(sim_params.get('scene_overrides'), dict):
-            import yaml
-
-            sim_params['scene_overrides'] = yaml.safe_dump(
-                sim_params['scene_overrides'], default_flow_style=True
-            ).strip()
         if self.controller:
             params = {'scene': self.scene}
             params.update(self.controller_parameters)
@@ -237,58 +171,11 @@ class SimHarness:
                 'pulsejet_ctrl.controller_node', params, self.log_dir / 'controller_node.log', env
             )
         self.processes['sim_node'] = NodeProcess(
-            'pulsejet_sim.ros.sim_node', sim_params, self.log_dir / 'sim_node.log', env
+            'pulsejet_sim.ros.sim_node',
+            sim_node_parameters(self.scene, self.pacing, self.parameters),
+            self.log_dir / 'sim_node.log',
+            env,
         )
-
-        self.context = rclpy.Context()
-        rclpy.init(
-            context=self.context,
-            domain_id=self.domain_id,
-            signal_handler_options=rclpy.signals.SignalHandlerOptions.NO,
-        )
-        self.node = rclpy.create_node(f'sim_harness_{os.getpid()}', context=self.context)
-        self.executor = make_executor(context=self.context)
-        self.executor.add_node(self.node)
-        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        self.qos = qos
-        for topic in (names.TOPIC_VOLUME, names.TOPIC_MANTLE_RADIUS, names.TOPIC_FLUID_MASS):
-            self.node.create_subscription(Float64, topic, self._store_value(topic), qos)
-        self.node.create_subscription(
-            TwistStamped,
-            names.TOPIC_VELOCITY,
-            lambda m: self._values.__setitem__('velocity', m.twist.linear.x),
-            qos,
-        )
-        self.node.create_subscription(
-            WrenchStamped,
-            names.TOPIC_THRUST,
-            lambda m: self._values.__setitem__('thrust', m.wrench.force.x),
-            qos,
-        )
-        self.node.create_subscription(Clock, names.TOPIC_CLOCK, self._on_clock, qos)
-        self.node.create_subscription(
-            JointState, names.TOPIC_APPLIED_COMMAND, self._on_applied, qos
-        )
-        self.node.create_subscription(
-            DiagnosticArray, names.TOPIC_DIAGNOSTICS, self._on_diagnostics, qos
-        )
-        self._cmd_pubs = {
-            field: self.node.create_publisher(Float64, topic, qos)
-            for topic, field in names.COMMAND_FIELDS.items()
-        }
-        self._clients = {
-            'pause': self.node.create_client(SetBool, names.SERVICE_PAUSE),
-            'step': self.node.create_client(Trigger, names.SERVICE_STEP),
-            'reset': self.node.create_client(Trigger, names.SERVICE_RESET),
-            f'{SIM_NODE_NAME}/set_parameters': self.node.create_client(
-                SetParameters, f'{SIM_NODE_NAME}/set_parameters'
-            ),
-            f'{SIM_NODE_NAME}/get_parameters': self.node.create_client(
-                GetParameters, f'{SIM_NODE_NAME}/get_parameters'
-            ),
-        }
-        if self.wait_started:
-            self.wait_until_started()
 
     def wait_until_started(self, timeout_s: float | None = None) -> SimState:
         """
@@ -296,25 +183,20 @@ class SimHarness:
 
         The controller, when started, must also be matched on /clock and the command topics.
         """
-        timeout_s = self.startup_timeout_s if timeout_s is None else timeout_s
-        end = time.monotonic() + timeout_s
-        clients = list(self._clients.values())
+        from pulsejet_sim.core import topics
 
         def ready():
-            if not all(c.service_is_ready() for c in clients):
-                return False
-            if not all(p.get_subscription_count() > 0 for p in self._cmd_pubs.values()):
+            if not self.controls.connected():
                 return False
             if self.controller and (
-                self.node.count_subscribers(names.TOPIC_CLOCK) < 2
-                or self.node.count_publishers(names.TOPIC_CMD_VALVE) < 2
+                self.node.count_subscribers(topics.TOPIC_CLOCK) < 2
+                or self.node.count_publishers(topics.TOPIC_CMD_VALVE) < 2
             ):
                 return False
             return bool(self.states)
 
-        self.spin_until(
-            ready, timeout_s=max(0.0, end - time.monotonic()), what='sim_node to start'
-        )
+        timeout_s = self.startup_timeout_s if timeout_s is None else timeout_s
+        self.spin_until(ready, timeout_s=timeout_s, what='sim_node to start')
         return self.states[-1]
 
     def close(self) -> dict[str, int]:
@@ -325,70 +207,33 @@ class SimHarness:
         for name in ('controller_node', 'sim_node'):
             if name in self.processes:
                 self.exit_codes[name] = self.processes[name].stop(self.stop_timeout_s)
-        if self.context is not None:
-            import rclpy
-
-            try:
-                if self.executor is not None:
-                    self.executor.shutdown(timeout_sec=1.0)
-                if self.node is not None:
-                    self.node.destroy_node()
-            finally:
-                rclpy.try_shutdown(context=self.context)
+        if self.client is not None:
+            self.client.close()
         if self._tmp is not None and not os.environ.get('PULSEJET_HARNESS_KEEP_LOGS'):
             self._keep = {name: p.output() for name, p in self.processes.items()}
             self._tmp.cleanup()
         return self.exit_codes
 
-    # -- callbacks ------------------------------------------------------------------------------
+    def output(self, name: str = 'sim_node') -> str:
+        p = self.processes.get(name)
+        if p is None:
+            return ''
+        text = p.output()
+        return text or getattr(self, '_keep', {}).get(name, '')
 
-    def _store_value(self, topic):
-        key = topic.rsplit('/', 1)[1]
+    # -- the client node ------------------------------------------------------------------------
 
-        def cb(msg):
-            self._values[key] = msg.data
+    @property
+    def context(self):
+        return None if self.client is None else self.client.context
 
-        return cb
+    @property
+    def node(self):
+        return None if self.client is None else self.client.node
 
-    def _on_clock(self, msg):
-        v = self._values
-        self._received += 1
-        self.states.append(
-            SimState(
-                time_s=_stamp_s(msg.clock),
-                velocity_m_s=v.get('velocity', math.nan),
-                volume_m3=v.get('volume', math.nan),
-                mantle_radius_m=v.get('mantle_radius', math.nan),
-                thrust_n=v.get('thrust', math.nan),
-                fluid_mass_kg=v.get('fluid_mass', math.nan),
-                wall_s=time.monotonic(),
-            )
-        )
-
-    def _on_applied(self, msg):
-        from pulsejet_sim.ros.messages import command_from_applied
-
-        t, cmd = command_from_applied(msg)
-        self.applied.append((t, cmd, time.monotonic()))
-
-    def _on_diagnostics(self, msg):
-        for status in msg.status:
-            if status.name.startswith('pulsejet: ') and status.name.endswith('sim_node'):
-                self.diagnostics_received.append(
-                    Diagnostic(
-                        level=(
-                            int.from_bytes(status.level, 'little')
-                            if isinstance(status.level, bytes)
-                            else int(status.level)
-                        ),
-                        message=status.message,
-                        values={kv.key: kv.value for kv in status.values},
-                        time_s=_stamp_s(msg.header.stamp),
-                        wall_s=time.monotonic(),
-                    )
-                )
-
-    # -- spinning and waiting -------------------------------------------------------------------
+    @property
+    def executor(self):
+        return None if self.client is None else self.client.executor
 
     def _check_alive(self):
         for name, p in self.processes.items():
@@ -398,12 +243,7 @@ class SimHarness:
                 )
 
     def spin(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while True:
-            left = end - time.monotonic()
-            if left <= 0:
-                return
-            self.executor.spin_once(timeout_sec=min(0.02, left))
+        self.client.spin(seconds)
 
     def spin_until(
         self,
@@ -412,17 +252,15 @@ class SimHarness:
         what: str = 'condition',
         check_alive: bool = True,
     ) -> None:
-        end = time.monotonic() + timeout_s
-        while not predicate():
-            if check_alive:
-                self._check_alive()
-            if time.monotonic() > end:
-                last = self.states[-1] if self.states else None
-                raise TimeoutError(
-                    f'timed out after {timeout_s:g} s waiting for {what}; last state: {last}\n'
-                    f'sim_node log tail:\n{self.output()[-2000:]}'
-                )
-            self.executor.spin_once(timeout_sec=0.02)
+        def timed_out():
+            return TimeoutError(
+                f'timed out after {timeout_s:g} s waiting for {what}; last state: {self.latest}\n'
+                f'sim_node log tail:\n{self.output()[-2000:]}'
+            )
+
+        self.client.spin_until(
+            predicate, timeout_s, timed_out, self._check_alive if check_alive else None
+        )
 
     def wait_for_exit(self, name: str = 'sim_node', timeout_s: float = 60.0) -> int:
         """Spin until the process exits (e.g. duration_s reached); returns its exit code."""
@@ -430,13 +268,27 @@ class SimHarness:
         self.spin_until(lambda: not p.alive(), timeout_s, f'{name} to exit', check_alive=False)
         return p.proc.returncode
 
+    # -- the published state --------------------------------------------------------------------
+
+    @property
+    def states(self):
+        return self.listener.states
+
+    @property
+    def applied(self):
+        return self.listener.applied
+
+    @property
+    def diagnostics_received(self):
+        return self.listener.diagnostics
+
     @property
     def latest(self) -> SimState | None:
-        return self.states[-1] if self.states else None
+        return None if self.listener is None else self.listener.latest
 
     @property
     def time_s(self) -> float:
-        return self.states[-1].time_s if self.states else math.nan
+        return self.latest.time_s if self.latest is not None else float('nan')
 
     def wait_for(
         self,
@@ -451,20 +303,16 @@ class SimHarness:
         Starts from the latest one already received (or, with since_wall, from the first received
         at or after that time.monotonic()); TimeoutError naming the last state otherwise.
         """
-        first = self._received - 1 if since_wall is None else self._received - len(self.states)
-        pos = [max(first, 0)]
+        listener = self.listener
+        first = listener.received - (1 if since_wall is None else len(listener.states))
+        position = [max(first, 0)]
         found: list[SimState] = []
 
         def check():
-            states, total = self.states, self._received
-            offset = total - len(states)  # index of states[0] in the whole stream
-            for i in range(max(pos[0], offset), total):
-                s = states[i - offset]
-                if (since_wall is None or s.wall_s >= since_wall) and predicate(s):
-                    found.append(s)
-                    return True
-            pos[0] = total
-            return False
+            state, position[0] = listener.first_match(predicate, position[0], since_wall)
+            if state is not None:
+                found.append(state)
+            return state is not None
 
         name = getattr(predicate, '__name__', '<lambda>')
         self.spin_until(
@@ -503,34 +351,17 @@ class SimHarness:
         cable_force_n: float | None = None,
     ) -> float:
         """Publish the given commands (each on its topic); returns the wall time of publication."""
-        from std_msgs.msg import Float64
-
-        for field, value in (
-            ('valve_opening', valve_opening),
-            ('pump_flow_m3_s', pump_flow_m3_s),
-            ('cable_force_n', cable_force_n),
-        ):
-            if value is not None:
-                self._cmd_pubs[field].publish(Float64(data=float(value)))
-        return time.monotonic()
+        return self.controls.publish(pump_flow_m3_s, valve_opening, cable_force_n)
 
     def call(self, name: str, request, timeout_s: float = SERVICE_TIMEOUT_S):
         """Call one of the harness's service clients and return the response."""
-        client = self._clients[name]
-        self.spin_until(client.service_is_ready, timeout_s, f'service {client.srv_name}')
-        future = client.call_async(request)
-        self.spin_until(future.done, timeout_s, f'the response of {client.srv_name}')
-        return future.result()
+        return self.client.call(self.controls.clients[name], request, timeout_s, self.spin_until)
 
     def pause(self):
-        from std_srvs.srv import SetBool
-
-        return self.call('pause', SetBool.Request(data=True))
+        return self.call('pause', SimControls.pause_request(True))
 
     def resume(self):
-        from std_srvs.srv import SetBool
-
-        return self.call('pause', SetBool.Request(data=False))
+        return self.call('pause', SimControls.pause_request(False))
 
     def step(self, n: int | None = None, check: bool = True):
         """
@@ -538,11 +369,9 @@ class SimHarness:
 
         Returns the new state (with check=False: the service response, even when refused).
         """
-        from std_srvs.srv import Trigger
-
         if n is not None:
             self.set_parameters(check=True, step_count=int(n))
-        response = self.call('step', Trigger.Request())
+        response = self.call('step', SimControls.trigger_request())
         if not check:
             return response
         if not response.success:
@@ -551,10 +380,8 @@ class SimHarness:
 
     def reset(self):
         """Back to the scene's initial state at t=0; returns the t=0 state."""
-        from std_srvs.srv import Trigger
-
         t_call = time.monotonic()
-        response = self.call('reset', Trigger.Request())
+        response = self.call('reset', SimControls.trigger_request())
         if not response.success:
             raise HarnessError(f'reset refused: {response.message}')
         return self.wait_for(
@@ -590,15 +417,8 @@ class SimHarness:
 
         Like set_parameters, for any node (e.g. '/controller_node').
         """
-        from rcl_interfaces.srv import SetParameters
-        from rclpy.parameter import Parameter
-
-        request = SetParameters.Request(
-            parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]
-        )
-        results = list(
-            self.call(self._parameter_client(node_name, 'set_parameters'), request).results
-        )
+        key = self.controls.parameter_client(node_name, 'set_parameters')
+        results = list(self.call(key, SimControls.set_parameters_request(values)).results)
         if check:
             bad = [f'{name}: {r.reason}' for name, r in zip(values, results) if not r.successful]
             if bad:
@@ -606,27 +426,8 @@ class SimHarness:
         return results
 
     def get_parameters(self, *names: str, node_name: str = SIM_NODE_NAME) -> dict:
-        from rcl_interfaces.srv import GetParameters
         from rclpy.parameter import parameter_value_to_python
 
-        response = self.call(
-            self._parameter_client(node_name, 'get_parameters'),
-            GetParameters.Request(names=list(names)),
-        )
+        key = self.controls.parameter_client(node_name, 'get_parameters')
+        response = self.call(key, SimControls.get_parameters_request(names))
         return {n: parameter_value_to_python(v) for n, v in zip(names, response.values)}
-
-    def _parameter_client(self, node_name: str, service: str) -> str:
-        from rcl_interfaces.srv import GetParameters, SetParameters
-
-        key = f'{node_name}/{service}'
-        if key not in self._clients:
-            kind = SetParameters if service == 'set_parameters' else GetParameters
-            self._clients[key] = self.node.create_client(kind, key)
-        return key
-
-    def output(self, name: str = 'sim_node') -> str:
-        p = self.processes.get(name)
-        if p is None:
-            return ''
-        text = p.output()
-        return text or getattr(self, '_keep', {}).get(name, '')

@@ -4,11 +4,12 @@ Run the property tests' generators at a larger example count; write the reliabil
 The table of docs/dev/reliability.md (inputs tried, faults injected, survived, data lost), with
 date, machine and command.
 
-    .venv/bin/python benchmarks/reliability_table.py [--examples N] [--kills K]
-                                                     [--out docs/dev/reliability.md]
+    .venv/bin/python -m benchmarks.reliability.reliability_table [--examples N] [--kills K]
+                                                                 [--out docs/dev/reliability.md]
 
-The generators and checks are the ones of test/test_fuzz_inputs.py, test/test_mcap_corruption.py
-and test/test_repair.py (imported from there, so the table and `make test` exercise the same code);
+The generators and checks are those of input_fuzz.py, recording_damage.py and killed_writer.py
+beside this file, which test/test_fuzz_inputs.py, test/test_mcap_corruption.py and
+test/test_repair.py run too (so the table and `make test` exercise the same code);
 here every example runs to the end and its outcome is counted instead of stopping at the first
 failure. "Survived" = the property held: a clear error naming what is wrong, or a run / the
 readable part of the file, and no traceback, hang or non-finite value.
@@ -27,12 +28,12 @@ import sys
 import tempfile
 import time
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
-os.environ.setdefault('PULSEJET_FUZZ_ALL_FLAGS', '1')  # also step lumped scenes with other terms
+from hypothesis import given, HealthCheck, settings
+from hypothesis import strategies as st
 
-from hypothesis import given, HealthCheck, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
+REPO = Path(__file__).resolve().parents[2]
+# also step lumped scenes with other terms (read when input_fuzz is imported, inside the runs)
+os.environ.setdefault('PULSEJET_FUZZ_ALL_FLAGS', '1')
 
 MARKER_START = '<!-- reliability-table:start -->'
 MARKER_END = '<!-- reliability-table:end -->'
@@ -76,7 +77,7 @@ def _settings(n: int):
 
 
 def fuzz_scenes(n: int, tmp: Path) -> Tally:
-    import test_fuzz_inputs as F
+    from benchmarks.reliability import input_fuzz as F
 
     tally = Tally()
 
@@ -91,7 +92,7 @@ def fuzz_scenes(n: int, tmp: Path) -> Tally:
 
 
 def fuzz_commands(n: int) -> Tally:
-    import test_fuzz_inputs as F
+    from benchmarks.reliability import input_fuzz as F
 
     tally = Tally()
     counts = collections.Counter()
@@ -117,7 +118,7 @@ def fuzz_commands(n: int) -> Tally:
 
 
 def fuzz_sweeps(n: int, tmp: Path) -> Tally:
-    import test_fuzz_inputs as F
+    from benchmarks.reliability import input_fuzz as F
 
     tally = Tally()
 
@@ -131,7 +132,7 @@ def fuzz_sweeps(n: int, tmp: Path) -> Tally:
 
 
 def fuzz_mcap(n: int, tmp: Path) -> tuple[Tally, dict[str, Tally], float]:
-    import test_mcap_corruption as M
+    from benchmarks.reliability import recording_damage as M
 
     rec = M.Recording(M.make_recording(tmp / 'run.mcap'))
     cut_tally = Tally()
@@ -181,7 +182,7 @@ def fuzz_mcap(n: int, tmp: Path) -> tuple[Tally, dict[str, Tally], float]:
 
 
 def kill_runs(k: int, tmp: Path) -> tuple[Tally, list[float], Tally]:
-    import test_repair as R
+    from benchmarks.reliability import killed_writer as R
 
     busy, idle = Tally(), Tally()
     lost: list[float] = []
@@ -255,11 +256,14 @@ def _stored(name: str):
 
 def live_fuzz_row() -> tuple:
     """
-    Return the live fuzz row from benchmarks/live_fuzz.py's stored run.
+    Return the live fuzz row from benchmarks/reliability/live_fuzz.py's stored run.
 
     Not rerun here: it takes minutes of wall time.
     """
-    what = 'live fuzz of sim_node topics, services and parameters (`benchmarks/live_fuzz.py`)'
+    what = (
+        'live fuzz of sim_node topics, services and parameters'
+        ' (`benchmarks/reliability/live_fuzz.py`)'
+    )
     stored = _stored('live_fuzz')
     if stored is None:
         return (what, 'not yet run', 'not yet run', 'not yet run', 'not yet run')
@@ -288,8 +292,11 @@ def live_fuzz_row() -> tuple:
 
 
 def soak_row() -> tuple:
-    """From benchmarks/soak.py's stored run."""
-    what = 'soak: 1 kHz publication, closed-loop controller, recorder (`benchmarks/soak.py`)'
+    """From benchmarks/reliability/soak.py's stored run."""
+    what = (
+        'soak: 1 kHz publication, closed-loop controller, recorder'
+        ' (`benchmarks/reliability/soak.py`)'
+    )
     stored = _stored('soak')
     if stored is None:
         return (what, 'not yet run', 'not yet run', 'not yet run', 'not yet run')
@@ -409,7 +416,7 @@ def table(examples: int, kills: int) -> str:
         MARKER_START,
         f'Generated {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC} '
         f'on {machine()} by',
-        f'`{Path(sys.executable).name} benchmarks/reliability_table.py '
+        f'`{Path(sys.executable).name} -m benchmarks.reliability.reliability_table '
         f'--examples {examples} --kills {kills}` '
         f'({wall:.0f} s).',
         '',

@@ -17,7 +17,8 @@ Prints a markdown table and writes benchmarks/results/recording.md (date, machin
 medians, the ratio physics/record of the medians). With --profile it adds the cProfile of one
 recorded run per scene (the functions with the most own time).
 
-    .venv/bin/python benchmarks/bench_recording.py [--repeats 7] [--duration 10] [--profile]
+    .venv/bin/python -m benchmarks.performance.bench_recording [--repeats 7] [--duration 10]
+        [--profile]
 """
 
 from __future__ import annotations
@@ -34,12 +35,11 @@ import tempfile
 import threading
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import bench_common  # noqa: E402
-from pulsejet_sim import analysis  # noqa: E402
-from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.studies.runner import Drive, LEDGER_PERIOD_S, run_scene  # noqa: E402
+from benchmarks import common as bench_common
+from pulsejet_sim import analysis
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.runner import Drive, LEDGER_PERIOD_S, run_scene
 
 SCENES = ('shell_robot', 'pump_cycle')
 TARGET_RATIO = 0.7  # issue: `pulsejet run` at >= 0.7x the speed of the physics with observations
@@ -180,8 +180,8 @@ def main(argv=None) -> int:
                 profiles.append(profile_text(name, args.duration, out))
     text = bench_common.header(
         'Offline recording: `pulsejet run` against the same physics without recording',
-        'python benchmarks/bench_recording.py ' + ' '.join(argv if argv is not None
-                                                           else sys.argv[1:]),
+        'python -m benchmarks.performance.bench_recording '
+        + ' '.join(argv if argv is not None else sys.argv[1:]),
     )
     load_after = os.getloadavg()
     text += (

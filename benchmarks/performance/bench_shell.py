@@ -21,13 +21,13 @@ own stable step and only where that fits the budget; at the grid's steps the sce
 message is quoted).
 
 In the same run, PyElastica 1.0 (PyPI; installed on demand into benchmarks/.venv/pyelastica, never
-a project requirement) simulates a 50-element Cosserat rod (benchmarks/elastica_rod.py), and the
-cost per element-step of both is reported side by side.
+a project requirement) simulates a 50-element Cosserat rod (elastica_rod.py beside this file), and
+the cost per element-step of both is reported side by side.
 
 Writes benchmarks/results/shell_speed_accuracy.md (table) and .png (error against cost).
 
-    .venv/bin/python benchmarks/bench_shell.py          # full grid, ~10-15 min on 2 cores
-    .venv/bin/python benchmarks/bench_shell.py --quick  # ~3 min (coarser grid, ref. 1.25e-4 s)
+    .venv/bin/python -m benchmarks.performance.bench_shell          # full grid, ~10-15 min
+    .venv/bin/python -m benchmarks.performance.bench_shell --quick  # ~3 min (coarser grid)
     options: --duration S (simulated seconds per run, default 2.5 = 4 periods), --no-elastica,
              --no-plot
 """
@@ -52,22 +52,20 @@ for _var in ('NUMBA_NUM_THREADS', 'OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MK
     os.environ.setdefault(_var, '1')
 
 HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+ROOT = HERE.parents[1]
 
-from bench_common import cpu_model as _cpu_model  # noqa: E402
+from benchmarks.common import cpu_model as _cpu_model  # noqa: E402
 import numpy as np  # noqa: E402
 from pulsejet_sim.core.model_io import SimulationBlowUp  # noqa: E402
 from pulsejet_sim.engine.simulation import Simulation  # noqa: E402
 from pulsejet_sim.scene import load_scene, SceneError  # noqa: E402
 
 SCENE = 'shell_robot'
-RESULTS_MD = HERE / 'results' / 'shell_speed_accuracy.md'
-RESULTS_PNG = HERE / 'results' / 'shell_speed_accuracy.png'
+RESULTS_MD = ROOT / 'benchmarks' / 'results' / 'shell_speed_accuracy.md'
+RESULTS_PNG = ROOT / 'benchmarks' / 'results' / 'shell_speed_accuracy.png'
 # under benchmarks/.venv/: git-ignored by the existing '.venv/' line and left out of the
 # colcon-build test's copy
-ELASTICA_VENV = HERE / '.venv' / 'pyelastica'
+ELASTICA_VENV = ROOT / 'benchmarks' / '.venv' / 'pyelastica'
 ELASTICA_REQ = 'pyelastica==1.0.*'
 SAMPLE_S = 0.01  # observation period (100 Hz)
 TOLERANCE = 0.01  # "within 1 %"
@@ -741,7 +739,7 @@ def main(argv=None) -> int:
     total_s = time.perf_counter() - t_start
     load_end = os.getloadavg()
     now = datetime.datetime.now(datetime.timezone.utc)
-    cmd = 'benchmarks/bench_shell.py' + (
+    cmd = 'python -m benchmarks.performance.bench_shell' + (
         ' ' + ' '.join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
         if (argv if argv is not None else sys.argv[1:])
         else ''
@@ -749,7 +747,8 @@ def main(argv=None) -> int:
     import numba
 
     header = (
-        f'# Shell model: speed against accuracy\n\nProduced by `benchmarks/bench_shell.py` ({mode}'
+        f'# Shell model: speed against accuracy\n\nProduced by'
+        f' `benchmarks/performance/bench_shell.py` ({mode}'
         f' grid). {now:%Y-%m-%d %H:%M} UTC; nproc {os.cpu_count()}, {platform.machine()}'
         f' {_cpu_model()}; Python {platform.python_version()}, numpy {np.__version__}, numba'
         f' {numba.__version__}; command: `{cmd}`; load average {load_start[0]:.2f} at the start,'
@@ -861,7 +860,8 @@ def main(argv=None) -> int:
         elastica.append(f'PyElastica run failed: {rod.get("error")}\n')
     else:
         elastica.append(
-            'Same run, same machine, one thread each. Rod: `benchmarks/elastica_rod.py` in the'
+            'Same run, same machine, one thread each. Rod:'
+            ' `benchmarks/performance/elastica_rod.py` in the'
             ' benchmark-only venv (`benchmarks/.venv/pyelastica`, pyelastica'
             f' {rod.get("pyelastica_version")}): a straight Cosserat rod, {rod["elements"]}'
             ' elements, E = 1 MPa, L = 0.2 m, r = 5 mm, rho = 1100 kg/m^3, clamped at one end'

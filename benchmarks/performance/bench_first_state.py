@@ -1,7 +1,7 @@
 """
 Benchmark: wall time from starting a freshly `colcon build`-installed sim_node to its first state.
 
-    .venv/bin/python benchmarks/bench_first_state.py [--scenes pump_cycle shell_robot]
+    .venv/bin/python -m benchmarks.performance.bench_first_state [--scenes pump_cycle shell_robot]
                                                      [--repeats 3] [--keep WORKDIR]
 
 Copies the repository into a temporary colcon workspace (as test/test_colcon_build.py does) and
@@ -37,7 +37,9 @@ import tempfile
 import threading
 import time
 
-REPO = Path(__file__).resolve().parents[1]
+from pulsejet_sim.ros.launching import default_domain_id, isolated_environment
+
+REPO = Path(__file__).resolve().parents[2]
 PACKAGE = 'pulsejet_sim'
 RESULTS = REPO / 'benchmarks' / 'results' / 'first_state.md'
 EXCLUDE = (
@@ -108,11 +110,7 @@ def sourced_env(ws: Path, domain: int) -> dict:
     ).stdout.decode()
     env = dict(item.split('=', 1) for item in out.split('\0') if '=' in item)
     env.pop(BOOTSTRAP_GUARD, None)  # the console script re-executes itself like a user's would
-    env['ROS_DOMAIN_ID'] = str(domain)
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env['PYTHONUNBUFFERED'] = '1'
-    env['RCUTILS_LOGGING_BUFFERED_STREAM'] = '0'
-    return env
+    return isolated_environment(domain, base=env)
 
 
 def installed_cache_files(ws: Path) -> list[Path]:
@@ -281,7 +279,7 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
 
-    domain = 215 + os.getpid() % 18  # 215-232: isolated from the tests' 1-101
+    domain = default_domain_id()  # 215-232: isolated from the tests' 1-100
     started = _dt.datetime.now().astimezone()
     host = machine()
     root = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix='bench_first_state_'))
@@ -323,7 +321,8 @@ def main(argv=None) -> int:
             shutil.rmtree(root, ignore_errors=True)
 
     cli = argv if argv is not None else sys.argv[1:]
-    command = ' '.join(['.venv/bin/python', f'benchmarks/{Path(__file__).name}', *cli])
+    module = 'benchmarks.performance.bench_first_state'
+    command = ' '.join(['.venv/bin/python', '-m', module, *cli])
     lines = [
         (
             '# First state of a freshly installed sim_node: cold compile vs numba cache warmed at'
@@ -357,7 +356,6 @@ def main(argv=None) -> int:
         ),
         '|---|---|---|---|---|---|---|---|',
     ]
-    sys.path.insert(0, str(REPO))
     from pulsejet_sim.scene import load_scene_data
 
     for scene, cold, warm in rows:

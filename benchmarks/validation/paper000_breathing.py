@@ -9,7 +9,7 @@ off; every run again at twice the elements and half the step. Measures, from the
 departure from rest, whether the mantle swings through rest, its overshoot, damping ratio and
 period. Writes benchmarks/results/paper000_study/breathing.md.
 
-    .venv/bin/python benchmarks/paper000_breathing.py
+    .venv/bin/python -m benchmarks.validation.paper000_breathing
 """
 
 from __future__ import annotations
@@ -17,20 +17,17 @@ from __future__ import annotations
 import datetime
 import math
 import os
-from pathlib import Path
 import platform
 import re
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import paper000_study as study  # noqa: E402
-from pulsejet_sim.core.model_io import SimulationBlowUp  # noqa: E402
-from pulsejet_sim.engine.simulation import Simulation  # noqa: E402
-from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.studies.sweep import load_sweep, merge  # noqa: E402
+from benchmarks.validation import paper000_study as study
+from pulsejet_sim.core.model_io import SimulationBlowUp
+from pulsejet_sim.engine.simulation import Simulation
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.sweep import load_sweep, merge
 
 OUT = study.OUT / 'breathing.md'
 PERTURBATION_M = 3e-3  # 10 % of the mantles' 30 mm largest radius
@@ -150,7 +147,7 @@ def main() -> int:
         '# Paper 000 study, experiment F.1: free breathing of the mantles\n\n'
         f'{now}, {platform.machine()}, {os.cpu_count()} cores, '
         f'Python {platform.python_version()}; '
-        f'command `.venv/bin/python benchmarks/paper000_breathing.py`, one process, '
+        f'command `.venv/bin/python -m benchmarks.validation.paper000_breathing`, one process, '
         f'{wall:.0f} s wall.\n\n'
         'Not the study (docs/PHYSICS_SHELL.md, "Experiment F", written before this ran): the '
         "study's internal scenes (96 elements, 0.5 ms; the routine's label does not matter "

@@ -6,7 +6,7 @@ of the paper's five qualitative findings each coupling reproduces, and the resol
 Not a test (about 10 minutes on 2 cores): writes benchmarks/results/paper000_study/
 {study.csv, refined.csv, study.png, README.md}.
 
-    .venv/bin/python benchmarks/paper000_study.py
+    .venv/bin/python -m benchmarks.validation.paper000_study
 
 The findings are checked by the rules in `findings` below, fixed before the study first ran (and
 made stricter after an independent review, before any outcome had been read: findings 2, 3, 4);
@@ -26,13 +26,13 @@ import platform
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.studies.sweep import (  # noqa: E402
+from benchmarks.common import RESULTS
+from pulsejet_sim.studies.sweep import (
     load_sweep, merge, plot_bars, run_sweep, RunSpec
 )
 
-OUT = Path(__file__).resolve().parent / 'results' / 'paper000_study'
+OUT = RESULTS / 'paper000_study'
 SWEEP = 'paper000_study'
 COLUMNS = (
     'peak_speed_m_s',
@@ -246,10 +246,11 @@ def report(
     when = (
         f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC}, {platform.machine()},'
         f' {os.cpu_count()} cores, Python {platform.python_version()}; command `.venv/bin/python'
-        f' benchmarks/paper000_study.py` ({wall:.0f} s wall)'
+        f' -m benchmarks.validation.paper000_study` ({wall:.0f} s wall)'
         if wall is not None
         else (
-            'report rebuilt from the stored tables by `benchmarks/paper000_study.py --report-only`'
+            'report rebuilt from the stored tables by'
+            ' `python -m benchmarks.validation.paper000_study --report-only`'
         )
     )
     lines = [

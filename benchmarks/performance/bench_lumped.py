@@ -17,15 +17,15 @@ import sys
 import tempfile
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.core.model_io import Command  # noqa: E402
-from pulsejet_sim.engine.simulation import Simulation  # noqa: E402
-from pulsejet_sim.models.lumped.model import TERM_BITS  # noqa: E402
-from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.studies.runner import run_scene  # noqa: E402
+from benchmarks.common import RESULTS as RESULTS_DIR
+from pulsejet_sim.core.model_io import Command
+from pulsejet_sim.engine.simulation import Simulation
+from pulsejet_sim.models.lumped.model import TERM_BITS
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.runner import run_scene
 
-RESULTS = Path(__file__).resolve().parent / 'results' / 'lumped.md'
+RESULTS = RESULTS_DIR / 'lumped.md'
 MINIMAL_TERMS = {name: False for name in TERM_BITS if name != 'internal_added_mass'}
 
 

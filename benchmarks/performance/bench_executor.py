@@ -1,7 +1,8 @@
 """
 CPU an rclpy executor spends taking a 1 kHz topic: single-threaded vs events executor.
 
-    .venv/bin/python benchmarks/bench_executor.py [--seconds 15] [--rate-hz 1000] [--no-write]
+    .venv/bin/python -m benchmarks.performance.bench_executor [--seconds 15] [--rate-hz 1000]
+        [--no-write]
 
 A publisher process sends rosgraph_msgs/Clock at the rate (best effort, as sim_node's /clock);
 for each executor kind and for deserialized and raw (CDR bytes, as the recorder takes them)
@@ -14,17 +15,16 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 import subprocess
 import sys
 import time
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-
-import bench_common  # noqa: E402
-from live_common import node_env  # noqa: E402
-from pulsejet_sim.ros.harness import default_domain_id  # noqa: E402
+from benchmarks import common
+from pulsejet_sim.ros.launching import (
+    default_domain_id,
+    discover_localhost_only,
+    isolated_environment,
+)
 
 WARM_UP_S = 3.0
 CASES = [('single', False), ('events', False), ('single', True), ('events', True)]
@@ -114,7 +114,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not args.seconds > 0 or not args.rate_hz > 0:
         ap.error(f'--seconds {args.seconds} / --rate-hz {args.rate_hz}: both must be > 0')
-    env = node_env(default_domain_id())
+    env = isolated_environment(default_domain_id())
+    discover_localhost_only()  # this process's participant too
     env.pop('PULSEJET_EXECUTOR', None)
     rows = []
     for kind, raw in CASES:
@@ -126,11 +127,11 @@ def main(argv=None) -> int:
         )
         print(rows[-1], end='', flush=True)
         time.sleep(1.0)
-    command = 'python benchmarks/bench_executor.py ' + ' '.join(
+    command = 'python -m benchmarks.performance.bench_executor ' + ' '.join(
         sys.argv[1:] if argv is None else argv
     )
     text = (
-        bench_common.header('rclpy executors taking a 1 kHz topic', command.strip())
+        common.header('rclpy executors taking a 1 kHz topic', command.strip())
         + f'A /clock publisher at {args.rate_hz:g} Hz (best effort) in its own process; one '
         f'subscriber process per row, {args.seconds:g} s measured after {WARM_UP_S:g} s. CPU is '
         "the subscriber's user + sys time over wall time.\n\n"
@@ -140,7 +141,7 @@ def main(argv=None) -> int:
     if args.no_write:
         print(text)
     else:
-        bench_common.write('executor', text)
+        common.write('executor', text)
     return 0
 
 

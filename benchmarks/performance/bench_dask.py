@@ -4,7 +4,9 @@ Sweep throughput: the local process pool against a local Dask cluster.
 Runs per second on the local process pool and on a local Dask cluster (dask.distributed, worker
 processes, one thread each), with 1 and 2 workers. Not a test.
 
-    .venv/bin/python benchmarks/bench_dask.py  # ~2 min on 2 cores -> benchmarks/results/dask.md
+    .venv/bin/python -m benchmarks.performance.bench_dask  # ~2 min on 2 cores
+
+Writes benchmarks/results/dask.md.
 
 Two workloads: `lumped` (the escape scene, 24 runs of 3 s: short runs, so the per-run overhead of
 the executor shows) and `shell` (8 runs of 1 s of paper 000's external study, consistent coupling:
@@ -17,18 +19,15 @@ from __future__ import annotations
 
 import datetime
 import os
-from pathlib import Path
 import platform
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_common import cpu_model  # noqa: E402
-from pulsejet_sim.studies.sweep import load_sweep, open_executor, run_sweep, RunSpec  # noqa: E402
+from benchmarks.common import cpu_model, RESULTS
+from pulsejet_sim.studies.sweep import load_sweep, open_executor, run_sweep, RunSpec
 
-OUT = Path(__file__).resolve().parent / 'results' / 'dask.md'
+OUT = RESULTS / 'dask.md'
 
 
 def workloads() -> dict[str, list[RunSpec]]:
@@ -113,7 +112,8 @@ def main() -> int:
         (
             f'{now:%Y-%m-%d %H:%M UTC}, `uname -m` {platform.machine()}, {cpu_model()},'
             f' {os.cpu_count()} cores (shared with other jobs), Python'
-            f' {platform.python_version()}; command: `.venv/bin/python benchmarks/bench_dask.py`\n'
+            f' {platform.python_version()}; command:'
+            ' `.venv/bin/python -m benchmarks.performance.bench_dask`\n'
         ),
         (
             'Workloads: `lumped` = escape scene, 24 runs of 3 s simulated; `shell` = 8 runs of 1 s'

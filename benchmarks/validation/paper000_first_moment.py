@@ -13,27 +13,22 @@ the water's momentum `rho S |V'| / m` is worth there (peaks over every step; the
 take them from the published samples, so theirs can read a little lower). Writes
 benchmarks/results/paper000_study/first_moment.md.
 
-    .venv/bin/python benchmarks/paper000_first_moment.py
+    .venv/bin/python -m benchmarks.validation.paper000_first_moment
 """
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
-import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-import bench_common  # noqa: E402
-import numpy as np  # noqa: E402
-import paper000_experiments as experiments  # noqa: E402
-import paper000_study as study  # noqa: E402
-from pulsejet_sim.core.model_io import Command  # noqa: E402
-from pulsejet_sim.models.shell import kernels as sk  # noqa: E402
-from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.studies.sweep import load_sweep, merge  # noqa: E402
+from benchmarks import common
+from benchmarks.validation import paper000_experiments as experiments
+from benchmarks.validation import paper000_study as study
+import numpy as np
+from pulsejet_sim.core.model_io import Command
+from pulsejet_sim.models.shell import kernels as sk
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.sweep import load_sweep, merge
 
 OUT = study.OUT / 'first_moment.md'
 FLOWING = 0.3  # of the run's largest |V'|: the steps where the momentum matters
@@ -139,9 +134,9 @@ def main() -> None:
             print(row, flush=True)
             lines.append(row)
     wall = time.time() - started
-    header = bench_common.header(
+    header = common.header(
         'Experiment K: the exact momentum of the water inside over the one-dimensional one',
-        'python benchmarks/paper000_first_moment.py',
+        'python -m benchmarks.validation.paper000_first_moment',
     )
     header += (
         f'One process, {wall:.0f} s wall.\n\n'

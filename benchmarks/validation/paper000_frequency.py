@@ -7,7 +7,7 @@ period, half cosines, as the study's first version's routines), at the study's w
 a tenth of it; every run again at twice the elements and half the step. Writes
 benchmarks/results/paper000_study/frequency.md.
 
-    .venv/bin/python benchmarks/paper000_frequency.py
+    .venv/bin/python -m benchmarks.validation.paper000_frequency
 """
 
 from __future__ import annotations
@@ -15,19 +15,16 @@ from __future__ import annotations
 import datetime
 import math
 import os
-from pathlib import Path
 import platform
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import paper000_study as study  # noqa: E402
-from pulsejet_sim.core.model_io import SimulationBlowUp  # noqa: E402
-from pulsejet_sim.engine.simulation import Simulation  # noqa: E402
-from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.studies.sweep import load_sweep, merge  # noqa: E402
+from benchmarks.validation import paper000_study as study
+from pulsejet_sim.core.model_io import SimulationBlowUp
+from pulsejet_sim.engine.simulation import Simulation
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.sweep import load_sweep, merge
 
 OUT = study.OUT / 'frequency.md'
 CASE = 'internal/paper/ellipsoid/E20k/T0.66'
@@ -125,7 +122,7 @@ def main() -> int:
         "the ellipsoid's response to the routine's frequency\n\n"
         f'{now}, {platform.machine()}, {os.cpu_count()} cores, '
         f'Python {platform.python_version()}; '
-        f'command `.venv/bin/python benchmarks/paper000_frequency.py`, one process, '
+        f'command `.venv/bin/python -m benchmarks.validation.paper000_frequency`, one process, '
         f'{wall:.0f} s wall.\n\n'
         'Not the study (docs/PHYSICS_SHELL.md, "Experiment F", written before this ran): '
         f'`{CASE}` (96 elements, 0.5 ms) with the routine at each frequency, contraction '

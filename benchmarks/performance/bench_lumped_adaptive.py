@@ -12,25 +12,22 @@ distance at the end, relative to the reference; energy-ledger closure at the end
 best of 5 repetitions (compilation excluded), one core. Writes
 benchmarks/results/lumped_adaptive.md.
 
-    .venv/bin/python benchmarks/bench_lumped_adaptive.py
+    .venv/bin/python -m benchmarks.performance.bench_lumped_adaptive
 """
 
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_common import header, write  # noqa: E402
-import numpy as np  # noqa: E402
-from pulsejet_sim.core.model_io import SimulationBlowUp  # noqa: E402
-from pulsejet_sim.models.lumped import kernels as K  # noqa: E402
-from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.studies.runner import Drive  # noqa: E402
+from benchmarks.common import header, write
+import numpy as np
+from pulsejet_sim.core.model_io import SimulationBlowUp
+from pulsejet_sim.models.lumped import kernels as K
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.runner import Drive
 
 PUBLISH_S = 0.01
 DURATION = {'escape': 3.0, 'pump_cycle': 10.0}
@@ -141,7 +138,7 @@ def main() -> int:
         )
     text = header(
         'Lumped model: adaptive vs fixed-step integrator, speed and accuracy',
-        'python benchmarks/bench_lumped_adaptive.py',
+        'python -m benchmarks.performance.bench_lumped_adaptive',
     ) + (
         'Outputs at 100 Hz; escape 3 s with a constant command, pump_cycle 10 s with the'
         " routine's commands replayed open loop (segments of constant command; the adaptive"

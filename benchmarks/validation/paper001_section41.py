@@ -7,7 +7,7 @@ readings of the text that the copy garbled, measures the figures the paper repor
 in pulsejet_sim/studies/section41.py and docs/PHYSICS_LUMPED.md), reruns every case at dt/2 to
 show the figures are converged, and writes benchmarks/results/paper001_section41.md.
 
-    .venv/bin/python benchmarks/paper001_section41.py
+    .venv/bin/python -m benchmarks.validation.paper001_section41
 """
 
 from __future__ import annotations
@@ -17,16 +17,15 @@ import math
 from pathlib import Path
 import platform
 import subprocess
-import sys
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.models.lumped import kernels as K  # noqa: E402
-from pulsejet_sim.scene import load_scene, SceneError  # noqa: E402
-from pulsejet_sim.studies.section41 import section41_figures  # noqa: E402
+from benchmarks import common
+from pulsejet_sim.models.lumped import kernels as K
+from pulsejet_sim.scene import load_scene, SceneError
+from pulsejet_sim.studies.section41 import section41_figures
 
-RESULTS = Path(__file__).resolve().parent / 'results' / 'paper001_section41.md'
-COMMAND = '.venv/bin/python benchmarks/paper001_section41.py'
+RESULTS = common.RESULTS / 'paper001_section41.md'
+COMMAND = '.venv/bin/python -m benchmarks.validation.paper001_section41'
 DURATION_S = 20.0
 COUPLINGS = ('paper', 'consistent')
 
@@ -236,7 +235,7 @@ def main() -> None:
             ['git', 'rev-parse', '--short', 'HEAD'],
             capture_output=True,
             text=True,
-            cwd=Path(__file__).resolve().parent.parent,
+            cwd=Path(__file__).resolve().parents[2],
         ).stdout.strip()
     except OSError:
         git = '?'

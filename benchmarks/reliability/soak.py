@@ -1,9 +1,9 @@
 """
 Soak: sim_node publishing at 1 kHz in real time with a closed-loop controller, for minutes.
 
-    .venv/bin/python benchmarks/soak.py [--minutes 10] [--rate-hz 1000] [--scene pump_cycle]
-                                        [--controller routine|every_state] [--warm-up-s 60]
-                                        [--record] [--param-period-s 1]
+    .venv/bin/python -m benchmarks.reliability.soak [--minutes 10] [--rate-hz 1000]
+                            [--scene pump_cycle] [--controller routine|every_state]
+                            [--warm-up-s 60] [--record] [--param-period-s 1]
                                         [--keep-dir DIR] [--no-write]
 
 sim_node (real_time pacing, command watchdog on: 0.1 s of simulated time, safe action) and
@@ -28,9 +28,9 @@ commands and /diagnostics to MCAP (read back at the end with rosbags). This proc
   - times sim_node's parameter services the way `ros2 param dump` uses them (list_parameters,
     then get_parameters of every name), one round after another, for the whole soak.
 Prints a table and writes benchmarks/results/soak.md (and soak.json, which
-benchmarks/reliability_table.py turns into its soak row). Exit code 1 if a target is missed:
-RTF 1.00 +- 0.01, memory growth < 5 %, no watchdog trip, no parameter round slower than 10 s.
-Not a test.
+benchmarks/reliability/reliability_table.py turns into its soak row). Exit code 1 if a target is
+missed: RTF 1.00 +- 0.01, memory growth < 5 %, no watchdog trip, no parameter round slower than
+10 s. Not a test.
 """
 
 from __future__ import annotations
@@ -44,21 +44,16 @@ import sys
 import tempfile
 import time
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
 
-import bench_common  # noqa: E402
-from live_common import (  # noqa: E402
-    cpu_seconds,
+from benchmarks import common
+from benchmarks.live import cpu_seconds, LiveClient, ParamProbe, percentile, rss_bytes
+from pulsejet_sim.core import topics
+from pulsejet_sim.ros.launching import (
     default_domain_id,
-    LiveClient,
-    node_env,
+    discover_localhost_only,
+    isolated_environment,
     NodeProcess,
-    ParamProbe,
-    percentile,
-    rss_bytes,
 )
-from pulsejet_sim.core import topics  # noqa: E402
 
 RSS_PERIOD_S = 10.0
 CONTROLLERS = {
@@ -102,7 +97,8 @@ def soak(
     warm_up_s: float = 60.0,
     param_period_s: float = 1.0,
 ) -> dict:
-    env = node_env(domain)
+    env = isolated_environment(domain)
+    discover_localhost_only()  # this process's participant too
     procs = {
         'controller_node': NodeProcess(
             'pulsejet_ctrl.controller_node',
@@ -485,10 +481,12 @@ def main(argv=None) -> int:
             args.warm_up_s,
             args.param_period_s,
         )
-    command = 'python benchmarks/soak.py ' + ' '.join(sys.argv[1:] if argv is None else argv)
+    command = 'python -m benchmarks.reliability.soak ' + ' '.join(
+        sys.argv[1:] if argv is None else argv
+    )
     misses = verdicts(r)
     text = (
-        bench_common.header('Soak of sim_node with a closed-loop controller', command.strip())
+        common.header('Soak of sim_node with a closed-loop controller', command.strip())
         + table(r)
         + '\nVerdict: '
         + ('every target met.' if not misses else 'MISSED: ' + '; '.join(misses))
@@ -497,8 +495,8 @@ def main(argv=None) -> int:
     if args.no_write:
         print(text)
     else:
-        bench_common.write('soak', text)
-        (bench_common.RESULTS / 'soak.json').write_text(
+        common.write('soak', text)
+        (common.RESULTS / 'soak.json').write_text(
             json.dumps(
                 {'command': command.strip(), 'result': r, 'misses': misses}, indent=1, default=str
             )

@@ -7,22 +7,21 @@ both couplings at three meshes/steps (elements x2 and step /2 from one to the ne
 against the finest.
 Numerics only: it looks at no finding. Writes benchmarks/results/paper000_study/resolution.md.
 
-    .venv/bin/python benchmarks/paper000_resolution.py
+    .venv/bin/python -m benchmarks.validation.paper000_resolution
 """
 
 from __future__ import annotations
 
 import datetime
-from pathlib import Path
 import platform
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pulsejet_sim.studies.sweep import load_sweep, merge, run_one, RunSpec  # noqa: E402
+from benchmarks.common import RESULTS
+from pulsejet_sim.studies.sweep import load_sweep, merge, run_one, RunSpec
 
-OUT = Path(__file__).resolve().parent / 'results' / 'paper000_study'
+OUT = RESULTS / 'paper000_study'
 CORNERS = (
     (
         'external',
@@ -62,7 +61,7 @@ def main() -> int:
             '# Resolution of the paper 000 study'
             f' ({datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M UTC},'
             f' {platform.machine()}, Python {platform.python_version()},'
-            ' `benchmarks/paper000_resolution.py`)'
+            ' `python -m benchmarks.validation.paper000_resolution`)'
         ),
         '',
         (

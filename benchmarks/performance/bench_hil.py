@@ -1,7 +1,7 @@
 """
 Hardware-in-the-loop style benchmark: an external controller closes a loop on sim_node's state.
 
-    .venv/bin/python benchmarks/bench_hil.py [--seconds 60] [--rates 100 500 1000]
+    .venv/bin/python -m benchmarks.performance.bench_hil [--seconds 60] [--rates 100 500 1000]
                                              [--real-time-factor 1] [--no-write]
                                              [--sim-executor single|events] [--atomic]
 
@@ -35,13 +35,11 @@ import sys
 import tempfile
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_common import append  # noqa: E402
-import numpy as np  # noqa: E402
-import wake_floor  # noqa: E402
+from benchmarks.common import append, RESULTS as RESULTS_DIR
+from benchmarks.performance import wake_floor
+import numpy as np
 
-HERE = Path(__file__).resolve().parent
-RESULTS = HERE / 'results' / 'hil.md'
+RESULTS = RESULTS_DIR / 'hil.md'
 V0_M3, V1_M3 = 1.6e-3, 2.4e-3  # bang-bang band on the cavity volume
 PUMP_M3_S = 2.5e-3
 FILL = (PUMP_M3_S, 0.0)  # (pump flow, valve opening)
@@ -61,8 +59,8 @@ LEGEND = (
     ' is shared by fewer steps; on 2 cores the 1000 Hz stream is bounded by Python/DDS'
     ' publishing in sim_node and receiving in the controller, not by the physics. machine'
     ' floor: a process that only sleeps to a grid at the state rate, beside the measurement'
-    ' (benchmarks/wake_floor.py): how late it woke (p99) and its period jitter (p99); a'
-    ' command-to-state latency takes at least two wake-ups (sim_node on the command, the'
+    ' (benchmarks/performance/wake_floor.py): how late it woke (p99) and its period jitter'
+    ' (p99); a command-to-state latency takes at least two wake-ups (sim_node on the command, the'
     ' controller on the state), so its tail is no shorter than the floor.\n'
 )
 
@@ -81,21 +79,19 @@ def run_rate(
     from pulsejet_sim.core.model_io import Command
     from pulsejet_sim.ros import messages
     from pulsejet_sim.ros.executor import make_executor
-    from pulsejet_sim.ros.harness import NodeProcess
+    from pulsejet_sim.ros.launching import (
+        discover_localhost_only,
+        isolated_environment,
+        NodeProcess,
+    )
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
-    env = dict(
-        os.environ,
-        ROS_DOMAIN_ID=str(domain),
-        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-        RCUTILS_LOGGING_BUFFERED_STREAM='0',
-        PYTHONUNBUFFERED='1',
-    )
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env = isolated_environment(domain)
+    discover_localhost_only()  # this process's participant too
     sim = NodeProcess(
         'pulsejet_sim.ros.sim_node',
         {
@@ -302,7 +298,7 @@ def main(argv=None) -> int:
     )
     ap.add_argument('--note', default='', help='a line added under the header of the results file')
     args = ap.parse_args(argv)
-    from pulsejet_sim.ros.harness import default_domain_id
+    from pulsejet_sim.ros.launching import default_domain_id
 
     domain = default_domain_id() if args.domain_id is None else args.domain_id
     results = []
@@ -325,7 +321,8 @@ def main(argv=None) -> int:
     header = (
         f'date: {now}; machine: nproc {len(os.sched_getaffinity(0))} ({os.cpu_count()} CPUs),'
         f' {platform.machine()}, {platform.system()} {platform.release()}; python'
-        f' {platform.python_version()}\ncommand: `benchmarks/bench_hil.py --seconds'
+        f' {platform.python_version()}\ncommand:'
+        ' `python -m benchmarks.performance.bench_hil --seconds'
         f' {args.seconds:g} --rates {" ".join(f"{r:g}" for r in args.rates)} --real-time-factor'
         f' {args.real_time_factor:g} --sim-executor {args.sim_executor}'
         + (' --atomic' if args.atomic else '')

@@ -5,8 +5,8 @@ Not the study: its values stay as chosen; each experiment changes one reading of
 reruns the study's finding rules on it, on the study's first version (its routines: 30 % / 45 %
 half cosines; see FIRST_VERSION_ROUTINES). Writes benchmarks/results/paper000_study/experiments.md.
 
-    .venv/bin/python benchmarks/paper000_experiments.py                           # all
-    .venv/bin/python benchmarks/paper000_experiments.py --only fig12_edge,fixed_nozzle
+    .venv/bin/python -m benchmarks.validation.paper000_experiments                           # all
+    .venv/bin/python -m benchmarks.validation.paper000_experiments --only fig12_edge,fixed_nozzle
 
 `--only` runs the named experiments and replaces (or adds) only their sections of experiments.md.
 `--version 2` runs them on the study's second version instead (its triangle routines, the stored
@@ -37,7 +37,7 @@ F. elastic_wall: the wall's Kelvin-Voigt viscosity a tenth of the study's (`eta_
    instead of the authors' code's 500 Pa s; 0 crumples at the mesh scale), nearly the limit most
    favourable to a resonance (docs/PHYSICS_SHELL.md, "Experiment F";
    findings 3, 4, 5; internal cases, paper coupling). F.1, the mantles' free breathing, is
-   benchmarks/paper000_breathing.py.
+   benchmarks/validation/paper000_breathing.py.
 I. internal_inertia: the water inside the mantle carries the inertia of paper 001's
    one-dimensional internal flow (`fluid.internal_inertia: one_dimensional`: kinetic energy
    1/2 rho Lambda V'^2, docs/PHYSICS_SHELL.md "Experiment I"); all 54 cases, both couplings
@@ -73,11 +73,9 @@ import sys
 import time
 from typing import Callable
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import paper000_study as study  # noqa: E402
-from pulsejet_sim.studies.sweep import load_sweep, merge, run_one, RunRow, RunSpec  # noqa: E402
+from benchmarks.validation import paper000_study as study
+from pulsejet_sim.studies.sweep import load_sweep, merge, run_one, RunRow, RunSpec
 
 MODULI = {'E20k': 20000.0, 'E40k': 40000.0, 'E80k': 80000.0}
 # Experiments A-F ran on the study's first version, whose routines were 30 % / 45 % half cosines
@@ -433,7 +431,7 @@ def section(
     exp: Experiment,
     specs: list[RunSpec],
     stored: list[dict],
-    command: str = 'benchmarks/paper000_experiments.py',
+    command: str = '-m benchmarks.validation.paper000_experiments',
     table_dir: Path | None = None,
 ) -> str:
     start = time.perf_counter()
@@ -588,7 +586,7 @@ def main(argv=None) -> int:
             "All of them ran on the study's second version (the authors' code's triangle "
             "routines, the study as stored), and 'study (stored)' is its `study.csv`."
         )
-    command = 'benchmarks/paper000_experiments.py' + (
+    command = '-m benchmarks.validation.paper000_experiments' + (
         ' --version 2' if args.version == 2 else ''
     )
     start = time.perf_counter()

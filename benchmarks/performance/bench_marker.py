@@ -6,7 +6,7 @@ what sim_node sends five times a second while a viewer is subscribed. Both ways 
 one process, `--repeats` times each; the table gives medians and p90 of the wall time per
 message (the interpreter is held all that time) and their ratio.
 
-    .venv/bin/python benchmarks/bench_marker.py [--repeats 200]
+    .venv/bin/python -m benchmarks.performance.bench_marker [--repeats 200]
 
 Writes benchmarks/results/marker.md.
 """
@@ -14,13 +14,10 @@ Writes benchmarks/results/marker.md.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
-import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_common import header, write  # noqa: E402
-import numpy as np  # noqa: E402
+from benchmarks.common import header, write
+import numpy as np
 
 
 def main() -> None:
@@ -59,7 +56,7 @@ def main() -> None:
     ratio = np.median(times['objects']) / np.median(times['arrays'])
     text = header(
         'Mantle Marker: Python objects against arrays',
-        f'python benchmarks/bench_marker.py --repeats {args.repeats}',
+        f'python -m benchmarks.performance.bench_marker --repeats {args.repeats}',
     ) + (
         f'shell_robot meridian: {len(r_m)} nodes, {n_points} vertices '
         f'({messages.MANTLE_MARKER_SEGMENTS} facets); {args.repeats} interleaved repeats '

@@ -1,8 +1,9 @@
 """
 The machine's own timing floor: how late a process that does nothing but wake on a grid wakes.
 
-    .venv/bin/python benchmarks/wake_floor.py [--seconds 60] [--rate-hz 100] [--spin-ms 0]
-    .venv/bin/python benchmarks/wake_floor.py --table [--seconds 30]
+    .venv/bin/python -m benchmarks.performance.wake_floor [--seconds 60] [--rate-hz 100]
+        [--spin-ms 0]
+    .venv/bin/python -m benchmarks.performance.wake_floor --table [--seconds 30]
 
 A Python loop sleeps to absolute deadlines k / rate (time.sleep to the next deadline, monotonic
 clock) and records when it woke. It prints one JSON line: the wake-up lateness and the period
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 import subprocess
 import sys
 import time
@@ -119,10 +119,9 @@ def main(argv=None) -> int:
             f' --spin-ms {args.spin_ms} between 0 and the period'
         )
     if args.table:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from bench_common import header, write
+        from benchmarks.common import header, write
 
-        command = ' '.join(['python benchmarks/wake_floor.py'] + sys.argv[1:])
+        command = ' '.join(['python -m benchmarks.performance.wake_floor'] + sys.argv[1:])
         write(
             'wake_floor',
             header("The machine's timing floor: a process that only waits for a grid", command)

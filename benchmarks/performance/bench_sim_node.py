@@ -1,7 +1,7 @@
 """
 Benchmark of the live sim_node: publication rate, period jitter and real-time factor held.
 
-    .venv/bin/python benchmarks/bench_sim_node.py [--seconds 60] [--real-time-factor 1]
+    .venv/bin/python -m benchmarks.performance.bench_sim_node [--seconds 60] [--real-time-factor 1]
                                                   [--publish-rate 0] [--scene pump_cycle]
                                                   [--controller]
 
@@ -32,15 +32,14 @@ import subprocess
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from bench_common import append  # noqa: E402
-from live_common import cpu_seconds  # noqa: E402
-import numpy as np  # noqa: E402
-from pulsejet_sim.ros.node_params import ros_value  # noqa: E402
-import wake_floor  # noqa: E402
+from benchmarks.common import append
+from benchmarks.live import cpu_seconds
+from benchmarks.performance import wake_floor
+import numpy as np
+from pulsejet_sim.ros.node_params import ros_value
 
 HERE = Path(__file__).resolve().parent
-RESULTS = HERE / 'results' / 'sim_node.md'
+RESULTS = HERE.parent / 'results' / 'sim_node.md'
 
 
 def stop(proc: subprocess.Popen, timeout=10.0) -> int:
@@ -252,7 +251,8 @@ def main(argv=None) -> int:
     )
     now = _dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
     command_line = ' '.join(
-        ['benchmarks/bench_sim_node.py'] + (argv if argv is not None else sys.argv[1:])
+        ['python -m benchmarks.performance.bench_sim_node']
+        + (argv if argv is not None else sys.argv[1:])
     )
     header = (
         f'## sim_node benchmark, {now}\n\n'
@@ -266,8 +266,8 @@ def main(argv=None) -> int:
     if not args.no_write:
         append(
             RESULTS,
-            '# sim_node live benchmarks\n\nProduced by `benchmarks/bench_sim_node.py`; newest'
-            ' last.\n\n',
+            '# sim_node live benchmarks\n\nProduced by'
+            ' `benchmarks/performance/bench_sim_node.py`; newest last.\n\n',
             text,
         )
         print(f'appended to {RESULTS}')

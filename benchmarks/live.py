@@ -12,14 +12,10 @@ from dataclasses import dataclass, field
 import math
 import os
 from pathlib import Path
-import sys
 import time
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from pulsejet_sim.core import topics  # noqa: E402
-from pulsejet_sim.ros.harness import default_domain_id, NodeProcess  # noqa: E402
+from pulsejet_sim.core import topics
+from pulsejet_sim.ros.launching import default_domain_id, NodeProcess
 
 
 def node_env(domain: int) -> dict:

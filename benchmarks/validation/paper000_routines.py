@@ -14,7 +14,7 @@ spread into the last period's stroke ratio, the period ratio and a rest, beside 
 of the wall's relaxation time 3 eta / E (`lag_strokes`); written to
 `benchmarks/results/paper000_study/routines.md`. docs/PHYSICS_SHELL.md, "Experiment G".
 
-    .venv/bin/python benchmarks/paper000_routines.py [--rerun]
+    .venv/bin/python -m benchmarks.validation.paper000_routines [--rerun]
 """
 
 from __future__ import annotations
@@ -23,17 +23,14 @@ import argparse
 import csv
 import functools
 import math
-from pathlib import Path
 import sys
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench_common import header, write  # noqa: E402
-import paper000_study as study  # noqa: E402
-from pulsejet_sim.engine.simulation import Simulation  # noqa: E402
-from pulsejet_sim.scene import load_scene  # noqa: E402
-from pulsejet_sim.studies.sweep import load_sweep, merge  # noqa: E402
+from benchmarks.common import header, write
+from benchmarks.validation import paper000_study as study
+from pulsejet_sim.engine.simulation import Simulation
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies.sweep import load_sweep, merge
 
 CYCLES_CSV = study.OUT / 'routines.csv'
 LAGS_S = (0.019, 0.0375, 0.075, 0.12, 0.25, 0.5, 1.0)
@@ -231,7 +228,7 @@ def main() -> int:
     text = (
         header(
             "Experiment G: the routine's effect split into stroke and rate",
-            'python benchmarks/paper000_routines.py [--rerun]',
+            'python -m benchmarks.validation.paper000_routines [--rerun]',
         )
         + 'Every internal case of the study (second version) rerun as it is, its volume and speed'
         ' read every step (`routines.csv`; `--rerun` remakes it, ~10 min); the peak speeds equal'

@@ -1,9 +1,9 @@
 """
 Live fuzz of sim_node: floods its command topics, services and parameters and counts what breaks.
 
-    .venv/bin/python benchmarks/live_fuzz.py [--seconds 600]
-                                             [--scene pump_cycle --scene shell_robot]
-                                             [--rate-hz 2000] [--seed 1] [--no-write]
+    .venv/bin/python -m benchmarks.reliability.live_fuzz [--seconds 600]
+                                 [--scene pump_cycle --scene shell_robot]
+                                 [--rate-hz 2000] [--seed 1] [--no-write]
 
 For each scene a real sim_node runs as a process (real_time pacing, command watchdog on) in an
 isolated ROS domain with localhost discovery. This process floods it at `--rate-hz` (>= 1 kHz)
@@ -18,7 +18,8 @@ with:
 It checks every published state message for non-finite numbers, restarts sim_node if it dies
 (counted: must stay 0), times the parameter services as `ros2 param dump` uses them, and samples
 sim_node's resident memory. It prints a table and writes benchmarks/results/live_fuzz.md (and
-live_fuzz.json, which benchmarks/reliability_table.py turns into its live row). Not a test.
+live_fuzz.json, which benchmarks/reliability/reliability_table.py turns into its live row).
+Not a test.
 """
 
 from __future__ import annotations
@@ -33,20 +34,16 @@ import sys
 import tempfile
 import time
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
 
-import bench_common  # noqa: E402
-from live_common import (  # noqa: E402
-    cpu_seconds,
+from benchmarks import common
+from benchmarks.live import cpu_seconds, LiveClient, ParamProbe, rss_bytes
+from pulsejet_sim.core import topics
+from pulsejet_sim.ros.launching import (
     default_domain_id,
-    LiveClient,
-    node_env,
+    discover_localhost_only,
+    isolated_environment,
     NodeProcess,
-    ParamProbe,
-    rss_bytes,
 )
-from pulsejet_sim.core import topics  # noqa: E402
 
 WEIRD = (float('nan'), float('inf'), -float('inf'), 1e308, -1e308, -1.0, 5e-324, 0.0)
 SERVICE_TIMEOUT_S = 10.0
@@ -254,7 +251,8 @@ def restore(flood: Flood) -> None:
 def fuzz_scene(
     scene: str, seconds: float, rate_hz: float, seed: int, domain: int, log_dir: Path
 ) -> dict:
-    env = node_env(domain)
+    env = isolated_environment(domain)
+    discover_localhost_only()  # this process's participant too
     params = {
         'scene': scene,
         'pacing': 'real_time',
@@ -437,8 +435,10 @@ def main(argv=None) -> int:
             results.append(
                 fuzz_scene(scene, args.seconds, args.rate_hz, args.seed + i, domain, Path(tmp))
             )
-    command = 'python benchmarks/live_fuzz.py ' + ' '.join(sys.argv[1:] if argv is None else argv)
-    text = bench_common.header('Live fuzz of sim_node', command.strip()) + table(results)
+    command = 'python -m benchmarks.reliability.live_fuzz ' + ' '.join(
+        sys.argv[1:] if argv is None else argv
+    )
+    text = common.header('Live fuzz of sim_node', command.strip()) + table(results)
     failed = [
         r['scene']
         for r in results
@@ -466,8 +466,8 @@ def main(argv=None) -> int:
     if args.no_write:
         print(text)
     else:
-        bench_common.write('live_fuzz', text)
-        (bench_common.RESULTS / 'live_fuzz.json').write_text(
+        common.write('live_fuzz', text)
+        (common.RESULTS / 'live_fuzz.json').write_text(
             json.dumps({'command': command.strip(), 'results': results}, indent=1, default=str)
             + '\n'
         )

@@ -13,23 +13,20 @@ measure of a loaded run. Shell: ShellCableEnv in an AsyncVectorEnv with N worker
 (shell_robot, dt = 1e-2 s). Writes benchmarks/results/envs.md, keeping the previous run's table
 below the new one.
 
-    .venv/bin/python benchmarks/bench_envs.py [--robot-steps 4e6] [--repeats 5]
+    .venv/bin/python -m benchmarks.performance.bench_envs [--robot-steps 4e6] [--repeats 5]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-from pathlib import Path
 import sys
 import time
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_common import header, RESULTS, write  # noqa: E402
-import numpy as np  # noqa: E402
-from pulsejet_sim.envs import LumpedPumpValveVectorEnv, make_shell_vector_env  # noqa: E402
+from benchmarks.common import header, RESULTS, write
+import numpy as np
+from pulsejet_sim.envs import LumpedPumpValveVectorEnv, make_shell_vector_env
 
 
 def bench_lumped(
@@ -111,7 +108,8 @@ def main() -> int:
         )
     load_after = os.getloadavg()
     text = header(
-        'Vector environments: robot-steps per second', 'python benchmarks/bench_envs.py'
+        'Vector environments: robot-steps per second',
+        'python -m benchmarks.performance.bench_envs',
     ) + (
         'A robot-step is one physics step of one robot (lumped: RK4, dt = 1e-4 s; shell: '
         'implicit midpoint, dt = 1e-2 s). Real-time factor = simulated robot-seconds per wall '

@@ -1,7 +1,7 @@
 """
 Which valve openings the lumped model can hold, and whether a closing valve faults on its way shut.
 
-    .venv/bin/python benchmarks/valve_seat_probe.py [--code DIR] [--no-write]
+    .venv/bin/python -m benchmarks.validation.valve_seat_probe [--code DIR] [--no-write]
 
 For each shipped lumped scene and each valve opening, from three starts (at rest; inflated for 0.2
 s and for 1 s by the pump with the valve shut) and seven pump flows (0 to the command limit 0.05
@@ -24,11 +24,10 @@ import platform
 import subprocess
 import sys
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-from bench_common import append  # noqa: E402
+from benchmarks.common import append, RESULTS as RESULTS_DIR
 
-RESULTS = HERE / 'results' / 'valve_seat.md'
+REPO = Path(__file__).resolve().parents[2]
+RESULTS = RESULTS_DIR / 'valve_seat.md'
 OPENINGS = (1e-9, 1e-6, 1e-4, 3e-4, 1e-3, 1.5e-3, 2e-3, 3e-3, 1e-2, 0.1, 0.5, 1.0)
 FLOWS_M3_S = (0.0, 1e-4, 1e-3, 2.5e-3, 6e-3, 0.02, 0.05)
 INFLATE_S = (0.0, 0.2, 1.0)
@@ -94,11 +93,24 @@ def table(scene: str, rows: list[dict]) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.strip().split('\n')[0])
-    ap.add_argument('--code', type=Path, default=HERE.parent, help='pulsejet checkout to probe')
+    ap.add_argument('--code', type=Path, default=REPO, help='pulsejet checkout to probe')
     ap.add_argument('--no-write', action='store_true')
     args = ap.parse_args(argv)
     code = args.code.resolve()
-    sys.path.insert(0, str(code))
+    if not (code / 'pulsejet_sim' / '__init__.py').is_file():
+        ap.error(f'--code {args.code}: not a pulsejet checkout (no pulsejet_sim package there)')
+    import pulsejet_sim
+
+    if Path(pulsejet_sim.__file__).resolve().parents[1] != code:
+        # another checkout's model: run this probe again in a process started in that checkout,
+        # whose directory comes first on sys.path, so pulsejet_sim is imported from there
+        if os.environ.get('PULSEJET_PROBE_RERUN'):
+            ap.error(f'--code {code}: no pulsejet_sim package imported from there')
+        env = dict(os.environ, PULSEJET_PROBE_RERUN='1')
+        env['PYTHONPATH'] = os.pathsep.join(p for p in (str(REPO), env.get('PYTHONPATH')) if p)
+        rerun = [sys.executable, '-m', 'benchmarks.validation.valve_seat_probe']
+        rerun += sys.argv[1:] if argv is None else list(argv)
+        return subprocess.run(rerun, cwd=code, env=env).returncode
     commit = subprocess.run(
         ['git', '-C', str(code), 'rev-parse', '--short', 'HEAD'],
         capture_output=True,
@@ -116,8 +128,8 @@ def main(argv=None) -> int:
     text = (
         f'## {now:%Y-%m-%d %H:%M UTC}, model of commit {commit}{modified}'
         f'\n\nmachine: {platform.machine()}, {os.cpu_count()} cores, Python'
-        f' {platform.python_version()}; command: `benchmarks/valve_seat_probe.py'
-        f'{" --code " + str(args.code) if args.code.resolve() != HERE.parent else ""}`;'
+        f' {platform.python_version()}; command: `python -m benchmarks.validation.valve_seat_probe'
+        f'{" --code " + str(args.code) if code != REPO else ""}`;'
         f' smallest valve opening a command may ask for: {VALVE_MIN_OPENING:g}\n\n'
         + '\n\n'.join(table(s, probe(s)) for s in SCENES)
         + '\n'
@@ -127,7 +139,8 @@ def main(argv=None) -> int:
         append(
             RESULTS,
             '# Valve openings the lumped model can hold\n\nProduced by'
-            ' `benchmarks/valve_seat_probe.py`; newest last. A fault is a SimulationBlowUp'
+            ' `benchmarks/validation/valve_seat_probe.py`; newest last. A fault is a'
+            ' SimulationBlowUp'
             ' (reported, never published as NaN); refused: the command was refused'
             ' (CommandError).\n\n',
             text,

@@ -1,0 +1,1 @@
+"""Reliability campaigns: live fuzz and soak of the nodes, and the table of every campaign."""
