@@ -157,7 +157,7 @@ def test_stored_scene_is_validated_and_paths_not_followed(
 ) -> None:
     marker = tmp_path / 'executed'
     outside = tmp_path / 'outside.yaml'  # a valid scene, but outside the project
-    outside.write_text((Path(resim.__file__).parents[1] / 'config' / 'escape.yaml').read_text())
+    outside.write_text((Path(resim.__file__).parents[2] / 'config' / 'escape.yaml').read_text())
     metadata = {
         k: v.replace('{marker}', str(marker)).replace('{outside}', str(outside))
         for k, v in metadata.items()
