@@ -245,3 +245,20 @@ def test_linear_law_key_is_the_default_and_refuses_rubber_keys():
     data['material']['shear_modulus_pa'] = 3e4
     with pytest.raises(SceneError, match='material.shear_modulus_pa'):
         scene_from_dict(data, 'bad')
+
+
+def test_mooney_rivlin_scene_builds_and_closes_its_books():
+    """law: mooney_rivlin takes C1 and C2 as given; the energy at t = 0 is the membrane's."""
+    scene = rubber_scene(
+        {'law': 'mooney_rivlin', 'mooney_rivlin_c1_pa': 15e3, 'mooney_rivlin_c2_pa': 3e3}
+    )
+    model = scene.model
+    assert model.shell_law == 'mooney_rivlin' and model.flags & K.O_HYPERELASTIC
+    assert (model.params[K.P_MR_C1], model.params[K.P_MR_C2]) == (15e3, 3e3)
+    y = model.initial_state()
+    model.advance(y, 0.0, 5000, Command(0.0, 1.0, 0.0))
+    ledger = model.energy_ledger(y)
+    expected = K.membrane_spheroid(0.15, 0.03, 0.15, 0.114, 15e3, 3e3, 0.0015)[0]
+    print(f"in_initial {ledger['in_initial']:.6f} J, closure {ledger['closure_error']:.2e} J")
+    assert ledger['in_initial'] == pytest.approx(expected, rel=1e-12)
+    assert abs(ledger['closure_relative']) < 1e-10
