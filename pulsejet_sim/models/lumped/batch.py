@@ -790,6 +790,11 @@ def batch_kernel(flags: int, exact: bool = False, n_state: int = K.NY):
             "options.nozzle_section: 'shell' is not in the batch kernel; allowed here: 'rigid' "
             '(run such a scene one robot at a time, LumpedModel.advance)'
         )
+    if flags & K.O_HYPERELASTIC:
+        raise ValueError(
+            "material.law: a rubber membrane is not in the batch kernel; allowed here: 'linear' "
+            '(run such a scene one robot at a time, LumpedModel.advance)'
+        )
     return K.specialised(
         advance_batch_exact if exact else advance_batch_fast,
         flags,

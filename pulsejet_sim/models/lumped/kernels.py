@@ -21,7 +21,9 @@ out), the nozzle inertance ``Lambda = rho L_n / A_n`` (so ``m_l = Lambda V_b^2``
 8), the pressure drop across the nozzle ``dp_n = dp_visc + dp_valve + dp_jet`` (laminar friction
 and inlet loss, i.e. the paper's ``c b'``; valve loss; the Bernoulli pressure that accelerates the
 jet), the outer flow's pull ``R_x = 1/2 dm_x/db U^2`` and the paper's fluid stiffness ``k_x``
-(section 3.5, eq. 10).
+(section 3.5, eq. 10). ``k (b - b0)`` is the linear spring of the paper; with ``O_HYPERELASTIC``
+it is ``dU/db`` of a rubber membrane's strain energy ``U(b)`` (``shell_elastic``,
+``docs/theory/hyperelastic.md``), and the elastic energy in the ledger is that ``U``.
 
 The energy ledger books what the paper's equations create, each as the power of the difference
 between the applied and the energy-consistent generalised force (``Y_C_*``): the closure
@@ -78,6 +80,10 @@ O_ADDED_MASS_SIMPLIFIED = 1 << 17  # m_x = C_1 rho 4/3 pi b^3 instead of Lamb's 
 # the nozzle's section follows the shell, A_n = pi r_n^2 (b/b0)^2 (reading G of paper 001's eq. 8,
 # whose A(x_e) is the ellipsoid's own section at the nozzle inlet plane, pi b^2 (1 - x_e^2))
 O_NOZZLE_FOLLOWS_SHELL = 1 << 18
+# the shell's elastic force is -dU/db of an incompressible Mooney-Rivlin (neo-Hookean: C2 = 0)
+# membrane on the rest ellipsoid instead of the linear spring k (b - b0)
+# (docs/theory/hyperelastic.md)
+O_HYPERELASTIC = 1 << 19
 
 # ---- state indices ----------------------------------------------------------------------------
 Y_X = 0  # vehicle position, m
@@ -126,7 +132,12 @@ P_U_MAX = 19  # bound of |U|, m/s
 P_P_RELIEF = 20  # pump relief valve: full flow up to this shell pressure, Pa
 P_P_STALL = 21  # ... and none at this one (the pump's pressure-flow curve), Pa
 P_NOZZLE_SECTION = 22  # A_n / b^2 when the nozzle follows the shell (pi r_n^2 / b0^2), 1
-NP = 23
+# the hyperelastic membrane (O_HYPERELASTIC): W = C1 (I1 - 3) + C2 (I2 - 3), Pa, and its thickness
+# at rest, m. P_K then holds the membrane's tangent stiffness d2U/db2 at b0 (reports only: k_x/k)
+P_MR_C1 = 23
+P_MR_C2 = 24
+P_MEMBRANE_THICKNESS = 25
+NP = 26
 
 # ---- diagnostic outputs of the right-hand side --------------------------------------------------
 D_THRUST = 0
@@ -198,6 +209,85 @@ def fluid_stiffness_force(b, u, p):
     return force, k_x
 
 
+# ---- hyperelastic membrane shell (docs/theory/hyperelastic.md) ---------------------------------
+# Gauss-Legendre nodes in the reference meridian angle theta in (0, pi/2) (the half from the
+# equator to a pole; the spheroid is symmetric about its equator). On the escape scenes' ellipsoid
+# (a = 5 b0) 24 nodes integrate the membrane energy to < 1e-11 relative for b >= 0.7 b0, 5e-9 at
+# b0/3 (test_lumped_hyperelastic) and 2e-3 at the collapse bound 0.02 b0, where a squeezed
+# membrane's energy gathers at the poles; the force is the derivative of this sum, so the ledger
+# closes whatever the quadrature's error.
+MEMBRANE_NODES = 24
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(MEMBRANE_NODES)
+MEMBRANE_SIN = np.sin(np.pi / 4.0 * (_GL_X + 1.0))
+MEMBRANE_COS = np.cos(np.pi / 4.0 * (_GL_X + 1.0))
+MEMBRANE_WEIGHT = np.pi / 4.0 * _GL_W
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def membrane_spheroid(a0, b0, a, b, c1, c2, thickness):
+    """
+    Return the strain energy of a spheroidal membrane and its derivatives (J, N, N, N/m).
+
+    The reference spheroid (semi-axes a0 along the axis, b0 across) is mapped to the spheroid
+    (a, b) point by point: the material point at meridian angle theta, (a0 cos, b0 sin), goes to
+    (a cos, b sin). Principal stretches: hoop h = b/b0 (the same everywhere), meridian
+    m = sqrt(a^2 sin^2 + b^2 cos^2) / sqrt(a0^2 sin^2 + b0^2 cos^2); thickness stretch 1/(h m)
+    (incompressible). W = C1 (I1 - 3) + C2 (I2 - 3) per unit reference volume with
+    I1 = h^2 + m^2 + 1/(h m)^2, I2 = 1/h^2 + 1/m^2 + (h m)^2 (neo-Hookean: C2 = 0, mu = 2 C1).
+    U = thickness * int W dA0 by Gauss-Legendre in theta. Returns (U, dU/da, dU/db, d2U/db2):
+    the derivatives are those of the quadrature sum itself, so -dU/db is exactly the force whose
+    work changes U.
+    """
+    energy = 0.0
+    du_da = 0.0
+    du_db = 0.0
+    d2u_db2 = 0.0
+    h = b / b0
+    h2 = h * h
+    for i in range(MEMBRANE_NODES):
+        s = MEMBRANE_SIN[i]
+        c = MEMBRANE_COS[i]
+        s0 = math.sqrt(a0 * a0 * s * s + b0 * b0 * c * c)
+        sc = math.sqrt(a * a * s * s + b * b * c * c)
+        m = sc / s0
+        m2 = m * m
+        dm_db = b * c * c / (sc * s0)
+        dm_da = a * s * s / (sc * s0)
+        d2m_db2 = a * a * s * s * c * c / (sc * sc * sc * s0)
+        inv = 1.0 / (h2 * m2)  # the thickness stretch squared
+        w = c1 * (h2 + m2 + inv - 3.0) + c2 * (1.0 / h2 + 1.0 / m2 + h2 * m2 - 3.0)
+        w_h = c1 * (2.0 * h - 2.0 * inv / h) + c2 * (-2.0 / (h2 * h) + 2.0 * h * m2)
+        w_m = c1 * (2.0 * m - 2.0 * inv / m) + c2 * (-2.0 / (m2 * m) + 2.0 * h2 * m)
+        w_hh = c1 * (2.0 + 6.0 * inv / h2) + c2 * (6.0 / (h2 * h2) + 2.0 * m2)
+        w_mm = c1 * (2.0 + 6.0 * inv / m2) + c2 * (6.0 / (m2 * m2) + 2.0 * h2)
+        w_hm = c1 * 4.0 * inv / (h * m) + c2 * 4.0 * h * m
+        area = MEMBRANE_WEIGHT[i] * 2.0 * math.pi * b0 * s * s0  # reference area per dtheta
+        energy += area * w
+        du_da += area * w_m * dm_da
+        du_db += area * (w_h / b0 + w_m * dm_db)
+        d2u_db2 += area * (
+            w_hh / (b0 * b0) + 2.0 * w_hm * dm_db / b0 + w_mm * dm_db * dm_db + w_m * d2m_db2
+        )
+    scale = 2.0 * thickness  # both halves of the spheroid
+    return scale * energy, scale * du_da, scale * du_db, scale * d2u_db2
+
+
+@njit(cache=True, nogil=True, inline='always')
+def shell_elastic(flags, b, p):
+    """
+    Return the shell's elastic energy U (J), its force dU/db (N) and stiffness d2U/db2 (N/m).
+
+    Linear spring (the default): U = 1/2 k (b - b0)^2. With O_HYPERELASTIC: the membrane of
+    membrane_spheroid on the rest ellipsoid (a, b0), deformed at fixed length to (a, b).
+    """
+    if flags & O_HYPERELASTIC:
+        energy, _, force, stiffness = membrane_spheroid(
+            p[P_A], p[P_B0], p[P_A], b, p[P_MR_C1], p[P_MR_C2], p[P_MEMBRANE_THICKNESS]
+        )
+        return energy, force, stiffness
+    return 0.5 * p[P_K] * (b - p[P_B0]) ** 2, p[P_K] * (b - p[P_B0]), p[P_K]
+
+
 @njit(cache=True, nogil=True, inline='always')
 def shell_inertia(flags, p):
     """
@@ -262,9 +352,11 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     # up to the relief pressure of the shell's elastic pressure k (b - b0) / V_b, none at the stall
     # pressure, linear between; it keeps any command sequence from inflating the shell past its
     # bound
+    # the shell's elastic force dU/db and stiffness (the linear spring k (b - b0), k by default)
+    _, f_el, k_el = shell_elastic(flags, b, p)
     q_target = q_cmd
     if q_cmd > 0.0:
-        p_el = p[P_K] * (b - p[P_B0]) / v_b
+        p_el = f_el / v_b
         if p_el > p[P_P_RELIEF]:
             q_target = q_cmd * max(0.0, (p[P_P_STALL] - p_el) / (p[P_P_STALL] - p[P_P_RELIEF]))
     dq_p = (q_target - q_p) / p[P_PUMP_TAU]
@@ -305,7 +397,7 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
         # valve shut: incompressible water, the pump alone sets the volume rate
         q_n = 0.0
         dw = (dq_p - c_a * w * w) / v_b
-        p_cav = (m_shell * dw + p[P_K] * (b - p[P_B0]) + f_kx - reaction) / v_b
+        p_cav = (m_shell * dw + f_el + f_kx - reaction) / v_b
         dp_visc = 0.0
         dp_valve = 0.0
         dp_jet_ref = 0.0
@@ -351,7 +443,7 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
         dp_n = dp_visc + dp_valve + dp_jet
         m_b_total = m_shell + m_l
         force = (
-            -p[P_K] * (b - p[P_B0])
+            -f_el
             - f_kx
             + reaction
             + v_b * dp_n
@@ -367,7 +459,7 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
         if flags & O_NOZZLE_FOLLOWS_SHELL:
             p_cav += dinertance_db * w * q_n
         damping_rate = v_b * v_b * dpdq / m_b_total
-    spring = p[P_K]
+    spring = k_el
     if not flags & O_COUPLING_CONSISTENT:
         spring += k_x
 
@@ -483,7 +575,7 @@ def stored_energy(flags, y, p):
     b = y[Y_B]
     w = y[Y_W]
     u = y[Y_U]
-    elastic = 0.5 * p[P_K] * (b - p[P_B0]) ** 2
+    elastic, _, _ = shell_elastic(flags, b, p)
     m_vehicle = p[P_M_SOLID]
     if flags & T_FLUID_MASS:
         m_vehicle += rho * (4.0 / 3.0 * math.pi * p[P_A] * b * b - p[P_V_SOLID])

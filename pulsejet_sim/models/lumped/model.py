@@ -24,6 +24,7 @@ from pulsejet_sim.core.model_io import (
 )
 from pulsejet_sim.core.schema import check_section, Choice, Flag, Number
 from pulsejet_sim.models.lumped import kernels as K
+from pulsejet_sim.models.rubber import SILICONES
 from scipy import integrate
 
 TERM_BITS = {
@@ -59,8 +60,19 @@ GEOMETRY_SPEC = {
     'nozzle_inlet_position': Number(0.82, -0.99, 0.99, unit='(x_e, fraction of a)'),
     'solid_volume_m3': Number(0.0, 0.0, 1.0, unit='m^3'),
 }
+SHELL_LAWS = ('linear', 'neo_hookean', 'mooney_rivlin')
 MATERIAL_SPEC = {
+    # the shell's elastic law: 'linear' = the spring k (b - b0) of paper 001 (stiffness_n_m);
+    # 'neo_hookean' / 'mooney_rivlin' = the strain energy of an incompressible rubber membrane of
+    # thickness shell_thickness_m on the rest ellipsoid (docs/theory/hyperelastic.md)
+    'law': Choice('linear', SHELL_LAWS),
     'stiffness_n_m': Number(None, 0.0, 1e9, low_open=True, unit='N/m'),
+    # neo_hookean: a tabled silicone (models/rubber.py, with its source) or mu itself
+    'silicone': Choice('none', ('none', *SILICONES)),
+    'shear_modulus_pa': Number(0.0, 0.0, 1e10, low_open=True, unit='Pa'),
+    # mooney_rivlin: W = C1 (I1 - 3) + C2 (I2 - 3)
+    'mooney_rivlin_c1_pa': Number(0.0, 0.0, 1e10, low_open=True, unit='Pa'),
+    'mooney_rivlin_c2_pa': Number(0.0, 0.0, 1e10, unit='Pa'),
     'shell_thickness_m': Number(None, 0.0, 1.0, low_open=True, unit='m'),
     'density_kg_m3': Number(1100.0, 0.0, 1e5, low_open=True, unit='kg/m^3'),
     'payload_mass_kg': Number(0.0, 0.0, 1e4, unit='kg'),
@@ -128,6 +140,57 @@ _BLOWUP_CAUSES = {
 }
 
 
+# the material keys each law takes (the others are refused when given, never ignored)
+_LAW_KEYS = {
+    'linear': ('stiffness_n_m',),
+    'neo_hookean': ('silicone', 'shear_modulus_pa'),
+    'mooney_rivlin': ('mooney_rivlin_c1_pa', 'mooney_rivlin_c2_pa'),
+}
+
+
+def check_material(given: Any) -> tuple[dict[str, Any], float, float]:
+    """
+    Validate the material section for its law; return it with the membrane's (C1, C2), Pa.
+
+    (C1, C2) are (0, 0) for the linear spring. Raises ModelError naming the key.
+    """
+    law = 'linear'
+    if isinstance(given, Mapping) and 'law' in given:
+        law = MATERIAL_SPEC['law'].check('material.law', given['law'])
+    spec = MATERIAL_SPEC
+    if law != 'linear':  # no spring: stiffness_n_m is not needed (and refused below)
+        spec = {**MATERIAL_SPEC, 'stiffness_n_m': Number(0.0, 0.0, 1e9, unit='N/m')}
+    m = check_section('material', given, spec)
+    given = given or {}
+    for key in sorted({k for keys in _LAW_KEYS.values() for k in keys}):
+        if key in given and key not in _LAW_KEYS[law]:
+            if key == 'silicone' and given[key] == 'none':
+                continue
+            takes = ', '.join(f'{name}: {", ".join(keys)}' for name, keys in _LAW_KEYS.items())
+            raise ModelError(
+                f'material.{key}: given with material.law {law!r}, which does not use it; '
+                f'allowed: the keys of the law ({takes})'
+            )
+    if law == 'linear':
+        return m, 0.0, 0.0
+    if law == 'neo_hookean':
+        tabled = m['silicone'] != 'none'
+        if tabled == ('shear_modulus_pa' in given):
+            raise ModelError(
+                f'material.law: neo_hookean needs exactly one of material.silicone (one of '
+                f'{", ".join(SILICONES)}) or material.shear_modulus_pa (Pa); given '
+                f'{"both" if tabled else "neither"}'
+            )
+        mu = SILICONES[m['silicone']].shear_modulus_pa if tabled else m['shear_modulus_pa']
+        return m, 0.5 * mu, 0.0
+    if 'mooney_rivlin_c1_pa' not in given:
+        raise ModelError(
+            'material.mooney_rivlin_c1_pa: missing; allowed: '
+            f'{MATERIAL_SPEC["mooney_rivlin_c1_pa"].allowed()} (material.law mooney_rivlin)'
+        )
+    return m, m['mooney_rivlin_c1_pa'], m['mooney_rivlin_c2_pa']
+
+
 def internal_added_mass_kg(rho: float, a: float, x_e: float) -> float:
     """Paper's eq. 7: m_b = 4 pi/9 rho a^3 int_{-1}^{x_e} (1+x)^3 (2-x)^2 / (1-x) dx."""
     value, _ = integrate.quad(lambda x: (1 + x) ** 3 * (2 - x) ** 2 / (1 - x), -1.0, x_e)
@@ -168,6 +231,7 @@ class LumpedModel:
     terms: frozenset
     options: Mapping[str, Any]
     name: str = 'lumped'
+    shell_law: str = 'linear'  # material.law: the linear spring or a rubber membrane
     integrator: str = 'rk4'
     rtol: float = 1e-6
     atol: float = 1e-9
@@ -183,7 +247,9 @@ class LumpedModel:
         sections = {
             name: check_section(name, scene.get(name), spec)
             for name, spec in SECTION_SPECS.items()
+            if name != 'material'
         }
+        sections['material'], rubber_c1, rubber_c2 = check_material(scene.get('material'))
         g, m, f, act = (
             sections['geometry'],
             sections['material'],
@@ -231,6 +297,14 @@ class LumpedModel:
         p[K.P_A] = a
         p[K.P_B0] = b0
         p[K.P_K] = m['stiffness_n_m']
+        if m['law'] != 'linear':
+            p[K.P_MR_C1] = rubber_c1
+            p[K.P_MR_C2] = rubber_c2
+            p[K.P_MEMBRANE_THICKNESS] = m['shell_thickness_m']
+            # no spring: P_K holds the membrane's tangent stiffness at rest (for k_x/k only)
+            p[K.P_K] = K.membrane_spheroid(
+                a, b0, a, b0, rubber_c1, rubber_c2, m['shell_thickness_m']
+            )[3]
         p[K.P_M_SOLID] = (
             m['density_kg_m3'] * spheroid_area_m2(a, b0) * m['shell_thickness_m']
             + m['payload_mass_kg']
@@ -251,7 +325,12 @@ class LumpedModel:
         p[K.P_U_MAX] = 100.0
         k = m['stiffness_n_m']
 
-        def elastic_pressure(b_m):  # k (b - b0) / (dV/db), Pa
+        def elastic_pressure(b_m):  # k (b - b0) / (dV/db) or dU/db / (dV/db), Pa
+            if m['law'] != 'linear':
+                force = K.membrane_spheroid(
+                    a, b0, a, b_m, rubber_c1, rubber_c2, m['shell_thickness_m']
+                )[2]
+                return force / (8.0 / 3.0 * math.pi * a * b_m)
             return k * (b_m - b0) / (8.0 / 3.0 * math.pi * a * b_m)
 
         relief = act['pump_relief_pressure_pa']
@@ -285,6 +364,8 @@ class LumpedModel:
             flags |= K.O_ADDED_MASS_SIMPLIFIED
         if opts['nozzle_section'] == 'shell':
             flags |= K.O_NOZZLE_FOLLOWS_SHELL
+        if m['law'] != 'linear':
+            flags |= K.O_HYPERELASTIC
         p.setflags(write=False)
         command = Command(act['initial_pump_flow_m3_s'], act['initial_valve_opening'], 0.0)
         sim = sections['simulation']
@@ -296,6 +377,7 @@ class LumpedModel:
             initial_command=command,
             terms=frozenset(n for n in TERM_BITS if terms[n]),
             options=dict(opts),
+            shell_law=m['law'],
             integrator=sim['integrator'],
             rtol=sim['rtol'],
             atol=sim['atol'],
