@@ -75,6 +75,7 @@ from typing import Any
 import numpy as np
 from pulsejet_sim.analysis import metrics
 from pulsejet_sim.core import topics
+from pulsejet_sim.core.schema import mapping, Number
 import yaml
 
 FIGURES = {
@@ -191,24 +192,14 @@ def _number(
     high: float = math.inf,
     positive: bool = False,
 ) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float))
-        or not math.isfinite(value)
-        or value < low
-        or value > high
-        or (positive and value <= 0)
-    ):
-        raise FitError(f'{where}: {value!r} rejected; allowed: {allowed}')
-    return float(value)
+    """Return a fit file's number by the one schema rule (core.schema.Number), or FitError."""
+    low_open = positive and low <= 0.0  # positive: > 0 (a low above 0 already says more)
+    rule = Number(None, 0.0 if low_open else low, high, low_open=low_open)
+    return rule.accept(value, where, error=FitError, allowed=allowed)
 
 
 def _mapping(value: Any, where: str, allowed: str) -> dict:
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        raise FitError(f'{where}: {value!r} is not a mapping; allowed: {allowed}')
-    return value
+    return mapping(value, where, allowed, error=FitError)
 
 
 def _unknown(mapping: dict, where: str, allowed: tuple[str, ...]) -> None:
