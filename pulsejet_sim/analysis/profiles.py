@@ -654,19 +654,18 @@ def write_animation(
 # ---- CLI ----------------------------------------------------------------------------------------
 def _number(kind: type, low: float, what: str):
     """
-    Return an argparse type: a finite number > low.
+    Return an argparse type: a finite number > low (an integer when kind is int).
 
     Otherwise the type reports a message naming the value and what is allowed.
     """
+    from pulsejet_sim.core.schema import Number
+
+    rule = Number(None, low, low_open=True, integer=kind is int)
 
     def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            value = math.nan
-        if not (math.isfinite(value) and value > low):
-            raise argparse.ArgumentTypeError(f'{text!r} rejected; allowed: {what}')
-        return value
+        return rule.accept(
+            text, '', error=argparse.ArgumentTypeError, allowed=what, sep='', from_text=True
+        )
 
     return parse
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
-from pulsejet_sim.analysis import profiles
+from pulsejet_sim.analysis import metrics, profiles
 from pulsejet_sim.analysis.tool import RecordingToolError, run_recording_tool
 from pulsejet_sim.bag.reader import BagInfo, find_topic, iter_bag, load_series
 from pulsejet_sim.core.topics import LEDGER_STATUS_NAME
@@ -36,12 +36,6 @@ PULSEJET_TOPICS = (VELOCITY, THRUST, MANTLE_RADIUS, VOLUME, FLUID_MASS, ENERGY_L
 
 class AnalysisError(RecordingToolError):
     """The file is readable but holds nothing to analyse (names the file and what was expected)."""
-
-
-def _trapz(y: np.ndarray, t: np.ndarray) -> float:
-    if len(t) < 2:
-        return 0.0
-    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)))
 
 
 def _final_ledger(path: Path, topic: str) -> tuple[dict[str, float], str]:
@@ -71,8 +65,9 @@ def summarize(path: str | Path) -> dict[str, Any]:
     """
     Key numbers of a run. Units in the key names; NaN where the topic needed is absent.
 
-    peak_speed_m_s: max |v|; mean_speed_m_s: time average of |v|; distance_m: net forward travel
-    ∫v dt; thrust_impulse_n_s: ∫thrust dt; duration_s: span of simulation time covered;
+    peak_speed_m_s: max |v|; mean_speed_m_s: time average of |v| (metrics.time_mean_speed_m_s);
+    distance_m: net forward travel ∫v dt; thrust_impulse_n_s: ∫thrust dt; duration_s: span of
+    simulation time covered;
     fluid_mass_min_kg / _max_kg; message_counts: per stored topic; energy_ledger_j: last ledger;
     energy_ledger_level: its diagnostic level (OK / WARN). Raises BagReadError / AnalysisError.
     """
@@ -134,12 +129,9 @@ def summarize(path: str | Path) -> dict[str, Any]:
     velocity = get(VELOCITY)
     if velocity is not None and len(velocity[0]):
         t, v = velocity
-        span = t[-1] - t[0]
-        out['peak_speed_m_s'] = float(np.max(np.abs(v)))
-        out['mean_speed_m_s'] = (
-            _trapz(np.abs(v), t) / span if span > 0 else float(np.abs(v).mean())
-        )
-        out['distance_m'] = _trapz(v, t)
+        out['peak_speed_m_s'] = metrics.peak_speed_m_s(v)
+        out['mean_speed_m_s'] = metrics.time_mean_speed_m_s(t, v)
+        out['distance_m'] = metrics.distance_m(t, v)
         out['final_velocity_m_s'] = float(v[-1])
     else:
         out.update(
@@ -151,7 +143,7 @@ def summarize(path: str | Path) -> dict[str, Any]:
 
     thrust = get(THRUST)
     if thrust is not None and len(thrust[0]):
-        out['thrust_impulse_n_s'] = _trapz(thrust[1], thrust[0])
+        out['thrust_impulse_n_s'] = metrics.trapezoid(thrust[1], thrust[0])
         out['peak_thrust_n'] = float(np.max(thrust[1]))
     else:
         out.update(thrust_impulse_n_s=math.nan, peak_thrust_n=math.nan)

@@ -175,22 +175,93 @@ def read_yaml_file(path: Any, what: str | None = None) -> Any:
     return safe_load_yaml(data, what)
 
 
+class NumberRejected(ValueError):
+    """Why a value is not an allowed number: ``reason`` is 'not a number' or 'out of range'."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
 @dataclass(frozen=True)
 class Number:
+    """
+    A finite number in [low, high] ((low, high] with low_open), in `unit`.
+
+    The one rule every input reader applies to a number (scene sections, sweep, fit and
+    optimisation files, ROS parameters, command-line options): a bool is never a number, NaN and
+    infinities are out of range. Each reader words its message its own way through check() (scene
+    keys), accept() ("<where>: <value> rejected; allowed: <what>") or value() (the bare rule).
+    """
+
     default: float | None  # None: required
     low: float = -math.inf
     high: float = math.inf
     low_open: bool = False  # True: value must be > low (not >=)
     unit: str = ''
+    integer: bool = False  # with from_text: the text must read as an integer (a count)
 
-    def check(self, key: str, value: Any) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ModelError(f'{key}: {show(value)} is not a number; allowed: {self.allowed()}')
-        v = float(value)
+    def value(self, value: Any, from_text: bool = False) -> float:
+        """
+        Return value as a float (an int with `integer` and from_text) if this rule allows it.
+
+        from_text: also take what float() (int()) reads, e.g. '2.5' from a command line or a
+        string parameter. Raises NumberRejected with its reason.
+        """
+        if isinstance(value, bool):
+            raise NumberRejected('not a number')
+        if from_text:
+            try:
+                v = (int if self.integer else float)(value)
+            except (TypeError, ValueError):
+                raise NumberRejected('not a number') from None
+            except OverflowError:
+                raise NumberRejected('out of range') from None
+        elif not isinstance(value, (int, float)):
+            raise NumberRejected('not a number')
+        else:
+            try:
+                v = float(value)
+            except OverflowError:  # an int beyond the floats
+                raise NumberRejected('out of range') from None
         too_low = v <= self.low if self.low_open else v < self.low
         if not math.isfinite(v) or too_low or v > self.high:
-            raise ModelError(f'{key}: {show(value)} is out of range; allowed: {self.allowed()}')
+            raise NumberRejected('out of range')
         return v
+
+    def check(
+        self, key: str, value: Any, *, from_text: bool = False, allowed: str | None = None
+    ) -> float:
+        """Return value() or raise ModelError '<key>: <value> is <reason>; allowed: <what>'."""
+        try:
+            return self.value(value, from_text)
+        except NumberRejected as why:
+            raise ModelError(
+                f'{key}: {show(value)} is {why.reason}; allowed: {allowed or self.allowed()}'
+            ) from None
+
+    def accept(
+        self,
+        value: Any,
+        where: str,
+        *,
+        error: type[Exception] = ModelError,
+        allowed: str | None = None,
+        sep: str = ': ',
+        from_text: bool = False,
+    ) -> float:
+        """
+        Return value() or raise `error` '<where><sep><value> rejected; allowed: <what>'.
+
+        sep '=' words it as a parameter (name=value), sep '' for argparse (which names the
+        option itself); `allowed` replaces the generated range text.
+        """
+        try:
+            return self.value(value, from_text)
+        except NumberRejected:
+            raise error(
+                f'{where}{sep}{show(value)} rejected; allowed: {allowed or self.allowed()}'
+            ) from None
 
     def allowed(self) -> str:
         lo = '(' if self.low_open else '['
@@ -206,6 +277,27 @@ class Flag:
         if not isinstance(value, bool):
             raise ModelError(f'{key}: {show(value)} is not a boolean; allowed: true or false')
         return value
+
+    def accept(
+        self,
+        value: Any,
+        where: str,
+        *,
+        error: type[Exception] = ModelError,
+        sep: str = ': ',
+        from_text: bool = False,
+    ) -> bool:
+        """
+        Return the boolean or raise `error` '<where><sep><value> rejected; allowed: true or false'.
+
+        from_text: also take the words true and false (any case, spaces around), as a string
+        parameter gives them.
+        """
+        if isinstance(value, bool):
+            return value
+        if from_text and isinstance(value, str) and value.strip().lower() in ('true', 'false'):
+            return value.strip().lower() == 'true'
+        raise error(f'{where}{sep}{show(value)} rejected; allowed: true or false')
 
 
 @dataclass(frozen=True)
@@ -229,6 +321,21 @@ class Text:
         if not isinstance(value, str):
             raise ModelError(f'{key}: {show(value)} is not a string; allowed: text')
         return value
+
+
+def mapping(
+    value: Any, where: str, allowed: str, error: type[Exception] = ModelError
+) -> Mapping[str, Any]:
+    """
+    Return the mapping a section holds ({} when absent).
+
+    Anything else raises `error` '<where>: <value> is not a mapping; allowed: <allowed>'.
+    """
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise error(f'{where}: {show(value)} is not a mapping; allowed: {allowed}')
+    return value
 
 
 def check_section(section: str, given: Any, spec: Mapping[str, Any]) -> dict[str, Any]:

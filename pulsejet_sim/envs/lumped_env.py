@@ -27,10 +27,11 @@ from typing import Any
 import gymnasium as gym
 from gymnasium import spaces
 import numpy as np
+from pulsejet_sim.analysis import metrics
 from pulsejet_sim.core.model_io import Command, SimulationBlowUp, VALVE_MIN_OPENING
 from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.envs import rewards as R
-from pulsejet_sim.models.lumped import kernels as K
+from pulsejet_sim.models.lumped import model as lumped
 from pulsejet_sim.scene import load_scene
 
 OBS_NAMES = (
@@ -46,24 +47,29 @@ ACTION_NAMES = ('pump_flow_m3_s', 'valve_opening')
 
 def lumped_observation(Y: np.ndarray, params: np.ndarray) -> np.ndarray:
     """Observation rows from lumped states (NY... or (N, NY...)), float64."""
-    a = params[..., K.P_A]
-    b = Y[..., K.Y_B]
-    volume = 4.0 / 3.0 * math.pi * a * b * b - params[..., K.P_V_SOLID]
     return np.stack(
-        [Y[..., K.Y_U], b, Y[..., K.Y_W], volume, Y[..., K.Y_QP], Y[..., K.Y_VALVE]], axis=-1
+        [
+            lumped.velocity_m_s(Y),
+            lumped.minor_semi_axis_m(Y),
+            lumped.minor_semi_axis_rate_m_s(Y),
+            lumped.cavity_volume_m3(Y, params),
+            lumped.pump_flow_m3_s(Y),
+            lumped.valve_opening(Y),
+        ],
+        axis=-1,
     )
 
 
 def lumped_spaces(params: np.ndarray) -> tuple[spaces.Box, spaces.Box]:
-    a = params[K.P_A]
+    a = lumped.major_semi_axis_m(params)
     q_lo, q_hi = Command.LIMITS['pump_flow_m3_s']
     v_lo, v_hi = Command.LIMITS['valve_opening']
     action = spaces.Box(np.array([q_lo, v_lo]), np.array([q_hi, v_hi]), dtype=np.float64)
-    v_max = 4.0 / 3.0 * math.pi * a * params[K.P_B_MAX] ** 2
-    low = np.array(
-        [-params[K.P_U_MAX], params[K.P_B_MIN], -np.inf, -params[K.P_V_SOLID], -q_hi, 0.0]
-    )
-    high = np.array([params[K.P_U_MAX], params[K.P_B_MAX], np.inf, v_max, q_hi, 1.0])
+    b_min, b_max = lumped.minor_semi_axis_bounds_m(params)
+    u_max = lumped.speed_bound_m_s(params)
+    v_max = 4.0 / 3.0 * math.pi * a * b_max**2  # the cavity at b_max, solid volume not taken off
+    low = np.array([-u_max, b_min, -np.inf, -lumped.solid_volume_m3(params), -q_hi, 0.0])
+    high = np.array([u_max, b_max, np.inf, v_max, q_hi, 1.0])
     return spaces.Box(low, high, dtype=np.float64), action
 
 
@@ -81,8 +87,7 @@ def clip_actions(actions: np.ndarray, space: spaces.Box) -> np.ndarray:
 
 def lumped_mass_kg(params: np.ndarray) -> float:
     """Solid mass plus the water of the rest cavity (the cost of transport's m)."""
-    rest = 4.0 / 3.0 * math.pi * params[K.P_A] * params[K.P_B0] ** 2 - params[K.P_V_SOLID]
-    return float(params[K.P_M_SOLID] + params[K.P_RHO] * rest)
+    return float(lumped.dry_mass_kg(params) + lumped.rest_cavity_water_kg(params))
 
 
 def steps_per_period(control_period_s: float, dt_s: float) -> int:
@@ -159,11 +164,7 @@ class LumpedPumpValveEnv(gym.Env):
         self.sim.reset()
         if self.initial_b_jitter > 0.0:
             u = self.np_random.uniform(-self.initial_b_jitter, self.initial_b_jitter)
-            self.sim.state[K.Y_B] *= 1.0 + u
-            if self.sim.state[K.Y_VALVE] <= 0.0:  # a sealed cavity moves only with the pump
-                self.sim.state[K.Y_W] = self.sim.state[K.Y_QP] / (
-                    8.0 / 3.0 * math.pi * self.model.params[K.P_A] * self.sim.state[K.Y_B]
-                )
+            lumped.scale_minor_semi_axis(self.sim.state, self.model.params, 1.0 + u)
             self.sim.initial_state = self.sim.state.copy()
         self.periods = 0
         return self._obs(), {'time_s': 0.0, 'position_m': 0.0}
@@ -173,7 +174,7 @@ class LumpedPumpValveEnv(gym.Env):
         act = clip_actions(raw, self.action_space)
         command = Command(float(act[0]), float(act[1]), 0.0)
         y = self.sim.state
-        x0, w0 = float(y[K.Y_X]), float(y[K.Y_W_PUMP])
+        x0, w0 = float(lumped.position_m(y)), float(lumped.pump_work_j(y))
         info: dict[str, Any] = {'action_clipped': bool(np.any(act != raw))}
         terminated = False
         try:
@@ -190,10 +191,10 @@ class LumpedPumpValveEnv(gym.Env):
                 R.reward(
                     self.reward_name,
                     x0=x0,
-                    x1=float(y[K.Y_X]),
+                    x1=float(lumped.position_m(y)),
                     x_start=0.0,
                     work0=w0,
-                    work1=float(y[K.Y_W_PUMP]),
+                    work1=float(lumped.pump_work_j(y)),
                     period_s=self.control_period_s,
                     mass_kg=self.mass_kg,
                     target_speed_m_s=self.target_speed_m_s,
@@ -203,10 +204,15 @@ class LumpedPumpValveEnv(gym.Env):
         truncated = (not terminated) and self.periods >= self.max_periods
         info.update(
             time_s=self.periods * self.control_period_s,
-            position_m=float(y[K.Y_X]),
-            actuation_work_j=float(y[K.Y_W_PUMP]),
+            position_m=float(lumped.position_m(y)),
+            actuation_work_j=float(lumped.pump_work_j(y)),
             cost_of_transport=float(
-                R.cost_of_transport(y[K.Y_W_PUMP], y[K.Y_X], self.mass_kg, self.cot_min_distance_m)
+                metrics.cost_of_transport(
+                    lumped.pump_work_j(y),
+                    lumped.position_m(y),
+                    self.mass_kg,
+                    self.cot_min_distance_m,
+                )
             ),
         )
         return self._obs(), reward, terminated, truncated, info

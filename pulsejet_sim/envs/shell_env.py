@@ -28,6 +28,7 @@ from typing import Any
 import gymnasium as gym
 from gymnasium import spaces
 import numpy as np
+from pulsejet_sim.analysis import metrics
 from pulsejet_sim.core.model_io import Command, SimulationBlowUp
 from pulsejet_sim.engine.simulation import Simulation
 from pulsejet_sim.envs import rewards as R
@@ -162,7 +163,7 @@ class ShellCableEnv(gym.Env):
             position_m=x1,
             actuation_work_j=w1,
             cost_of_transport=float(
-                R.cost_of_transport(w1, x1, self.mass_kg, self.cot_min_distance_m)
+                metrics.cost_of_transport(w1, x1, self.mass_kg, self.cot_min_distance_m)
             ),
         )
         return self._obs(rate), reward, terminated, truncated, info

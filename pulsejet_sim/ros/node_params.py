@@ -15,9 +15,10 @@ flattened by rcl to the same names) as an override of that scene key (`scene_ove
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
 from typing import TYPE_CHECKING
+
+from pulsejet_sim.core.schema import Number
 
 if TYPE_CHECKING:  # rclpy's types are imported where used: the tables import without ROS
     from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
@@ -182,18 +183,15 @@ def check_number(name, value, low, high, allowed=None) -> float:
     """
     Return value (an int or float parameter) as float if finite and in [low, high].
 
-    Else ValueError.
+    Else ValueError 'parameter <name>=<value> rejected; allowed: ...'.
     """
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if ok:
-        value = float(value)
-        ok = math.isfinite(value) and low <= value <= high
-    if not ok:
-        raise ValueError(
-            f'parameter {name}={value!r} rejected; allowed: '
-            f'{allowed or f"a number in [{low:g}, {high:g}]"}'
-        )
-    return value
+    return Number(None, low, high).accept(
+        value,
+        f'parameter {name}',
+        error=ValueError,
+        allowed=allowed or f'a number in [{low:g}, {high:g}]',
+        sep='=',
+    )
 
 
 def check_parameters(params, specs) -> tuple[dict, SetParametersResult | None]:

@@ -63,6 +63,7 @@ import time
 from typing import Any, Sequence
 
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, iter_bag
+from pulsejet_sim.core.schema import Flag, Number
 
 CLOCK_TOPIC = '/clock'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
@@ -226,23 +227,13 @@ def qualify(topic: str) -> str:
 def _number(
     name: str, value: Any, allowed: str, low: float, low_open: bool, high: float = math.inf
 ) -> float:
-    if isinstance(value, bool) or value is None:
-        raise ConfigError(f'{name}={value!r} rejected; allowed: {allowed}')
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f'{name}={value!r} rejected; allowed: {allowed}') from None
-    if not math.isfinite(v) or v < low or (low_open and v == low) or v > high:
-        raise ConfigError(f'{name}={value!r} rejected; allowed: {allowed}')
-    return v
+    """Return a parameter's number (a number, or text a number reads from) or ConfigError."""
+    rule = Number(None, low, high, low_open=low_open)
+    return rule.accept(value, name, error=ConfigError, allowed=allowed, sep='=', from_text=True)
 
 
 def _boolean(name: str, value: Any) -> bool:
-    if isinstance(value, bool):
-        return value
-    if isinstance(value, str) and value.strip().lower() in ('true', 'false'):
-        return value.strip().lower() == 'true'
-    raise ConfigError(f'{name}={value!r} rejected; allowed: true or false')
+    return Flag(None).accept(value, name, error=ConfigError, sep='=', from_text=True)
 
 
 def _topic_list(name: str, value: Any) -> tuple[str, ...] | None:

@@ -42,7 +42,8 @@ Figures (computed from the run's published samples, `FIGURES` below):
 - the window is the last `periods` whole actuation periods before the end of the run (period
   boundaries at multiples of `period_s` from t = 0; `period_s` defaults to 1 / the scene's
   `frequency_hz`), and must start at or after `settle_s`; or [start_s, end_s] if given;
-- mean_speed_m_s: time average (trapezoidal) of the forward velocity over the window;
+- mean_speed_m_s: time average (trapezoidal) of the signed forward velocity over the window
+  (`metrics.window_mean_velocity_m_s`; a sweep's mean speed is a sample mean of |v| instead);
 - burst_speed_m_s: the largest forward velocity sample in the window; min_speed_m_s the smallest;
 - stroke_volume_m3: max - min cavity volume within each whole period of the window, averaged over
   the periods (with an explicit [start_s, end_s] window: max - min over the window);
@@ -72,7 +73,9 @@ import time
 from typing import Any
 
 import numpy as np
+from pulsejet_sim.analysis import metrics
 from pulsejet_sim.core import topics
+from pulsejet_sim.core.schema import mapping, Number
 import yaml
 
 FIGURES = {
@@ -189,24 +192,14 @@ def _number(
     high: float = math.inf,
     positive: bool = False,
 ) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float))
-        or not math.isfinite(value)
-        or value < low
-        or value > high
-        or (positive and value <= 0)
-    ):
-        raise FitError(f'{where}: {value!r} rejected; allowed: {allowed}')
-    return float(value)
+    """Return a fit file's number by the one schema rule (core.schema.Number), or FitError."""
+    low_open = positive and low <= 0.0  # positive: > 0 (a low above 0 already says more)
+    rule = Number(None, 0.0 if low_open else low, high, low_open=low_open)
+    return rule.accept(value, where, error=FitError, allowed=allowed)
 
 
 def _mapping(value: Any, where: str, allowed: str) -> dict:
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        raise FitError(f'{where}: {value!r} is not a mapping; allowed: {allowed}')
-    return value
+    return mapping(value, where, allowed, error=FitError)
 
 
 def _unknown(mapping: dict, where: str, allowed: tuple[str, ...]) -> None:
@@ -690,8 +683,8 @@ def figures(spec: FitSpec, s: Series) -> dict[str, float]:
         return {name: math.nan for name in FIGURES}
     t, v = s.t[m], s.velocity[m]
     out = {
-        'mean_speed_m_s': float(np.sum(0.5 * (v[1:] + v[:-1]) * np.diff(t)) / (t[-1] - t[0])),
-        'burst_speed_m_s': float(v.max()),
+        'mean_speed_m_s': metrics.window_mean_velocity_m_s(t, v),
+        'burst_speed_m_s': metrics.burst_speed_m_s(v),
         'min_speed_m_s': float(v.min()),
         'max_radius_m': float(s.radius[m].max()),
         'peak_thrust_n': float(s.thrust[m].max()),

@@ -62,6 +62,7 @@ import time
 from typing import Any, Callable, Sequence
 
 import numpy as np
+from pulsejet_sim.core.schema import Number
 from pulsejet_sim.studies.fit import dotted_overrides, get_dotted, Parameter
 from pulsejet_sim.studies.sweep import (
     executor_label,
@@ -283,19 +284,56 @@ def _evaluate(expr: str, values: dict[str, Any]) -> float:
 
 
 def _number(value: Any, where: str, allowed: str, positive: bool = False) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float))
-        or not math.isfinite(value)
-        or (positive and value <= 0)
-    ):
-        raise OptimizeError(f'{where}: {value!r} rejected; allowed: {allowed}')
-    return float(value)
+    """Return an optimisation file's number by the one schema rule, or OptimizeError."""
+    rule = Number(None, 0.0, low_open=True) if positive else Number(None)
+    return rule.accept(value, where, error=OptimizeError, allowed=allowed)
 
 
 def load_optimize(path: str | Path) -> OptimizeSpec:
-    """Read and validate an optimisation file (a path, or a name under config/optimize/)."""
-    from pulsejet_sim.scene import load_scene, SceneError
+    """
+    Read and validate an optimisation file (a path, or a name under config/optimize/).
+
+    Each section is checked in file order by its own reader below, then the spec is built and
+    its base scenes and corner designs are loaded once, so a bad key or range is refused before
+    any run. Raises OptimizeError naming the file, the key and what is allowed.
+    """
+    p, data = _read_optimize_file(path)
+    name = str(data.get('name', p.stem))
+    metric, sense = _objective(p, data)
+    options = _options(p, data)
+    if 'sweep' in data:
+        runs, axes, duration, sweep_runs = _study_runs(p, data)
+    else:
+        runs, axes, sweep_runs = _scene_runs(p, data, name), {}, []
+        duration = data.get('duration_s', 5.0)
+    duration = _number(duration, f'{p}: duration_s', 'a positive number of seconds', positive=True)
+    fixed = _fixed_labels(p, data, axes)
+    parameters = _parameters(p, data, axes, fixed)
+    derived = _derived(p, data, parameters)
+    axis_choices = [q.name for q in parameters if isinstance(q, Choice) and q.axis]
+    defaults = {a: fixed.get(a, labels[0]) for a, labels in axes.items()}
+    spec = OptimizeSpec(
+        path=p,
+        name=name,
+        objective=metric,
+        sense=sense,
+        duration_s=duration,
+        parameters=parameters,
+        derived=derived,
+        options=options,
+        base_runs=_base_runs(p, runs, axes, axis_choices, defaults),
+        axis_choices=axis_choices,
+        defaults=defaults,
+        sweep_runs=sweep_runs,
+    )
+    _check_scene_keys(spec)
+    _check_corner_designs(spec)
+    spec.compare = _compare(p, data)
+    return spec
+
+
+def _read_optimize_file(path: str | Path) -> tuple[Path, dict]:
+    """Return (resolved path, top-level mapping) of an optimisation file with only known keys."""
     from pulsejet_sim.scene.paths import read_config_file
 
     p, data = read_config_file(path, 'optimize', 'optimisation file', OptimizeError)
@@ -306,7 +344,11 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
     for key in data:
         if key not in TOP_KEYS:
             raise OptimizeError(f'{p}: {key}: unknown key; allowed: {", ".join(TOP_KEYS)}')
-    name = str(data.get('name', p.stem))
+    return p, data
+
+
+def _objective(p: Path, data: dict) -> tuple[str, str]:
+    """Return (metric, sense) of `objective`: a sweep metric (METRICS) to maximise or minimise."""
     objective = data.get('objective') or {}
     metric, sense = objective.get('metric', 'peak_speed_m_s'), objective.get('sense', 'max')
     if metric not in METRICS:
@@ -315,6 +357,11 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
         )
     if sense not in SENSES:
         raise OptimizeError(f'{p}: objective.sense: {sense!r}; allowed: max or min')
+    return metric, sense
+
+
+def _options(p: Path, data: dict) -> dict:
+    """Return the search options (OPTION_DEFAULTS filled in); the counts must be integers."""
     options = dict(OPTION_DEFAULTS)
     for key, value in (data.get('options') or {}).items():
         if key not in OPTION_DEFAULTS:
@@ -322,69 +369,80 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
                 f'{p}: options.{key}: unknown key; allowed: {", ".join(OPTION_DEFAULTS)}'
             )
         options[key] = value
-    for key in ('max_evals', 'population', 'seed'):
+    # differential evolution needs four designs to mutate one from three others
+    smallest = {'max_evals': 1, 'population': 4, 'seed': 0}
+    for key, least in smallest.items():
         if (
             isinstance(options[key], bool)
             or not isinstance(options[key], int)
-            or options[key] < (4 if key == 'population' else 1 if key == 'max_evals' else 0)
+            or options[key] < least
         ):
             raise OptimizeError(
-                f'{p}: options.{key}: {options[key]!r} rejected; allowed: an integer '
-                f'>= {4 if key == "population" else 1 if key == "max_evals" else 0}'
+                f'{p}: options.{key}: {options[key]!r} rejected; allowed: an integer >= {least}'
             )
+    return options
 
-    # the base design(s)
-    sweep_runs: list[RunSpec] = []
+
+def _study_runs(p: Path, data: dict) -> tuple[list[RunSpec], dict[str, list[str]], Any, list]:
+    """
+    Return the base runs of `study` in the `sweep` file, its axes, the raw duration, all runs.
+
+    Axes map each axis to its labels in the sweep's order; `overrides` go on top of the study's
+    own (what the study's base must change).
+    """
+    sweep_path = data['sweep']
+    if not Path(str(sweep_path)).is_file() and (p.parent / str(sweep_path)).is_file():
+        sweep_path = p.parent / str(sweep_path)
+    try:
+        meta, sweep_runs = load_sweep(sweep_path)
+    except (SweepError, yaml.YAMLError) as err:
+        raise OptimizeError(f'{p}: sweep: {err}') from None
+    study = data.get('study')
+    extra = data.get('overrides') or {}
+    if not isinstance(extra, dict):
+        raise OptimizeError(f'{p}: overrides: {extra!r} rejected; allowed: a mapping')
+    runs = [
+        RunSpec(r.study, r.labels, r.scene, merge(r.overrides, extra), r.duration_s, r.replace)
+        for r in sweep_runs
+        if r.study == study
+    ]
+    if not runs:
+        raise OptimizeError(
+            f'{p}: study: {study!r} is not a study of {meta["path"]}; allowed: one of '
+            f'{", ".join(dict.fromkeys(r.study for r in sweep_runs))}'
+        )
     axes: dict[str, list[str]] = {}
-    if 'sweep' in data:
-        sweep_path = data['sweep']
-        if not Path(str(sweep_path)).is_file() and (p.parent / str(sweep_path)).is_file():
-            sweep_path = p.parent / str(sweep_path)
-        try:
-            meta, sweep_runs = load_sweep(sweep_path)
-        except (SweepError, yaml.YAMLError) as err:
-            raise OptimizeError(f'{p}: sweep: {err}') from None
-        study = data.get('study')
-        extra = data.get('overrides') or {}
-        if not isinstance(extra, dict):
-            raise OptimizeError(f'{p}: overrides: {extra!r} rejected; allowed: a mapping')
-        # `overrides` go on top of the study's own (what the study's base must change)
-        runs = [
-            RunSpec(r.study, r.labels, r.scene, merge(r.overrides, extra), r.duration_s, r.replace)
-            for r in sweep_runs
-            if r.study == study
-        ]
-        if not runs:
-            raise OptimizeError(
-                f'{p}: study: {study!r} is not a study of {meta["path"]}; allowed: one of '
-                f'{", ".join(dict.fromkeys(r.study for r in sweep_runs))}'
-            )
-        for r in runs:
-            for axis, label in r.labels:
-                axes.setdefault(axis, [])
-                if label not in axes[axis]:
-                    axes[axis].append(label)
-        duration = data.get('duration_s', meta['duration_s'])
-    else:
-        if 'scene' not in data:
-            raise OptimizeError(
-                f'{p}: neither sweep (with study) nor scene given; allowed: one of them'
-            )
-        scene = str(data['scene'])
-        if not (Path(scene).is_file()) and (p.parent / scene).is_file():
-            scene = str(p.parent / scene)
-        runs = [
-            RunSpec(
-                name,
-                (),
-                scene,
-                dict(data.get('overrides') or {}),
-                5.0,
-                tuple(data.get('replace') or ()),
-            )
-        ]
-        duration = data.get('duration_s', 5.0)
-    duration = _number(duration, f'{p}: duration_s', 'a positive number of seconds', positive=True)
+    for r in runs:
+        for axis, label in r.labels:
+            axes.setdefault(axis, [])
+            if label not in axes[axis]:
+                axes[axis].append(label)
+    return runs, axes, data.get('duration_s', meta['duration_s']), sweep_runs
+
+
+def _scene_runs(p: Path, data: dict, name: str) -> list[RunSpec]:
+    """Return the one base run of `scene` (a path relative to the file, or a scene name)."""
+    if 'scene' not in data:
+        raise OptimizeError(
+            f'{p}: neither sweep (with study) nor scene given; allowed: one of them'
+        )
+    scene = str(data['scene'])
+    if not (Path(scene).is_file()) and (p.parent / scene).is_file():
+        scene = str(p.parent / scene)
+    return [
+        RunSpec(
+            name,
+            (),
+            scene,
+            dict(data.get('overrides') or {}),
+            5.0,
+            tuple(data.get('replace') or ()),
+        )
+    ]
+
+
+def _fixed_labels(p: Path, data: dict, axes: dict[str, list[str]]) -> dict[str, str]:
+    """Return `fixed`: axis -> the label every design keeps (a label of that axis)."""
     fixed = {str(k): str(v) for k, v in (data.get('fixed') or {}).items()}
     for axis, label in fixed.items():
         if axis not in axes or label not in axes[axis]:
@@ -392,13 +450,19 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
                 f'{p}: fixed.{axis}: {label!r} is not a label of an axis of the study; allowed: '
                 + '; '.join(f'{a}: {", ".join(ls)}' for a, ls in axes.items())
             )
+    return fixed
 
-    parameters: list[Parameter | Choice] = []
+
+def _parameters(
+    p: Path, data: dict, axes: dict[str, list[str]], fixed: dict[str, str]
+) -> list[Parameter | Choice]:
+    """Return the searched parameters: ranges {low, high[, scale]}, {axis} or {choices}."""
     raw = data.get('parameters')
     if not isinstance(raw, dict) or not raw:
         raise OptimizeError(
             f'{p}: parameters: allowed: a mapping name -> {{low, high}} | {{axis}} | {{choices}}'
         )
+    parameters: list[Parameter | Choice] = []
     for key, body in raw.items():
         key = str(key)
         where = f'{p}: parameters.{key}'
@@ -424,20 +488,31 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
                 )
             parameters.append(Choice(key, list(body['choices'])))
         else:
-            low = _number(body.get('low'), f'{where}.low', 'a finite number')
-            high = _number(
-                body.get('high'), f'{where}.high', f'a finite number above low ({low:g})'
-            )
-            if high <= low:
-                raise OptimizeError(
-                    f'{where}.high: {high!r} rejected; allowed: above low ({low:g})'
-                )
-            scale = body.get('scale', 'linear')
-            if scale not in ('linear', 'log') or (scale == 'log' and low <= 0):
-                raise OptimizeError(
-                    f'{where}.scale: {scale!r} rejected; allowed: linear, or log with low > 0'
-                )
-            parameters.append(Parameter(key, low, high, initial=low, log=scale == 'log'))
+            parameters.append(_range_parameter(where, key, body))
+    return parameters
+
+
+def _range_parameter(where: str, key: str, body: dict) -> Parameter:
+    """Return a searched range low < high, linear or log-spaced (log needs low > 0)."""
+    low = _number(body.get('low'), f'{where}.low', 'a finite number')
+    high = _number(body.get('high'), f'{where}.high', f'a finite number above low ({low:g})')
+    if high <= low:
+        raise OptimizeError(f'{where}.high: {high!r} rejected; allowed: above low ({low:g})')
+    scale = body.get('scale', 'linear')
+    if scale not in ('linear', 'log') or (scale == 'log' and low <= 0):
+        raise OptimizeError(
+            f'{where}.scale: {scale!r} rejected; allowed: linear, or log with low > 0'
+        )
+    return Parameter(key, low, high, initial=low, log=scale == 'log')
+
+
+def _derived(p: Path, data: dict, parameters: list[Parameter | Choice]) -> dict[str, str]:
+    """
+    Return `derived`: dotted scene key -> an expression of the numeric parameters.
+
+    A numeric parameter without a dotted key must feed some expression, or it would change
+    nothing.
+    """
     numeric = {q.key for q in parameters if isinstance(q, Parameter)}
     derived = {str(k): str(v) for k, v in (data.get('derived') or {}).items()}
     for key, expr in derived.items():
@@ -458,9 +533,17 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
                 f'{p}: parameters.{q.key}: neither a dotted scene key nor used in derived; '
                 'allowed: one of them'
             )
+    return derived
 
-    axis_choices = [q.name for q in parameters if isinstance(q, Choice) and q.axis]
-    defaults = {a: fixed.get(a, labels[0]) for a, labels in axes.items()}
+
+def _base_runs(
+    p: Path,
+    runs: list[RunSpec],
+    axes: dict[str, list[str]],
+    axis_choices: list[str],
+    defaults: dict[str, str],
+) -> dict[tuple, RunSpec]:
+    """Return the base run of every combination of the searched axes' labels (exactly one)."""
     base_runs: dict[tuple, RunSpec] = {}
     combos = [()]
     for a in axis_choices:
@@ -471,30 +554,21 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
         if len(match) != 1:
             raise OptimizeError(f'{p}: no single run of the study has the labels {want}')
         base_runs[combo] = match[0]
-    spec = OptimizeSpec(
-        path=p,
-        name=name,
-        objective=metric,
-        sense=sense,
-        duration_s=duration,
-        parameters=parameters,
-        derived=derived,
-        options=options,
-        base_runs=base_runs,
-        axis_choices=axis_choices,
-        defaults=defaults,
-        sweep_runs=sweep_runs,
-    )
-    # every scene key must exist in the base scene(s) and hold a number (or a choice's kind of
-    # value)
-    for combo, base in base_runs.items():
+    return base_runs
+
+
+def _check_scene_keys(spec: OptimizeSpec) -> None:
+    """Refuse a searched or derived dotted key that the base scene(s) do not hold."""
+    from pulsejet_sim.scene import load_scene, SceneError
+
+    p = spec.path
+    keys = [q.key if isinstance(q, Parameter) else q.name for q in spec.parameters]
+    for combo, base in spec.base_runs.items():
         try:
             scene = load_scene(base.scene, dict(base.overrides), replace=base.replace)
         except (SceneError, ValueError) as err:
             raise OptimizeError(f'{p}: the base scene {base.scene!r} is refused: {err}') from None
-        for key in [q.key if isinstance(q, Parameter) else q.name for q in parameters] + list(
-            derived
-        ):
+        for key in keys + list(spec.derived):
             if '.' not in key:
                 continue
             try:
@@ -504,31 +578,40 @@ def load_optimize(path: str | Path) -> OptimizeSpec:
                     f"{p}: {key}: not a key of the scene {base.scene!r} (with the study's "
                     'overrides); allowed: a dotted key present in it'
                 ) from None
-    # and the designs at the bounds must load (a bad key or range shows up before any run)
-    for corner in (np.zeros(len(parameters)), np.ones(len(parameters)) - 1e-12):
+
+
+def _check_corner_designs(spec: OptimizeSpec) -> None:
+    """Load the designs at the bounds, so a bad key or range shows up before any run."""
+    from pulsejet_sim.scene import load_scene, SceneError
+
+    for corner in (np.zeros(len(spec.parameters)), np.ones(len(spec.parameters)) - 1e-12):
         values = spec.values(corner)
         rs = spec.run_spec(values, 'check')
         try:
             load_scene(rs.scene, dict(rs.overrides), replace=rs.replace)
         except (SceneError, ValueError) as err:
             raise OptimizeError(
-                f'{p}: the design {values} is refused by the scene: {err}'
+                f'{spec.path}: the design {values} is refused by the scene: {err}'
             ) from None
-    if data.get('compare') is not None:
-        compare = dict(data['compare'])
-        csv_path = Path(str(compare.get('csv', '')))
-        if not csv_path.is_absolute() and not csv_path.is_file():
-            csv_path = p.parent / csv_path
-        if not csv_path.is_file():
-            raise OptimizeError(
-                f'{p}: compare.csv: {str(compare.get("csv"))!r} not found; allowed: a CSV of '
-                '`pulsejet '
-                'sweep` or of the paper study (path relative to the optimisation file)'
-            )
-        compare['csv'] = _relative(csv_path)
-        compare['where'] = {str(k): str(v) for k, v in (compare.get('where') or {}).items()}
-        spec.compare = compare
-    return spec
+
+
+def _compare(p: Path, data: dict) -> dict | None:
+    """Return `compare` with its CSV resolved (relative to the file), or None when absent."""
+    if data.get('compare') is None:
+        return None
+    compare = dict(data['compare'])
+    csv_path = Path(str(compare.get('csv', '')))
+    if not csv_path.is_absolute() and not csv_path.is_file():
+        csv_path = p.parent / csv_path
+    if not csv_path.is_file():
+        raise OptimizeError(
+            f'{p}: compare.csv: {str(compare.get("csv"))!r} not found; allowed: a CSV of '
+            '`pulsejet '
+            'sweep` or of the paper study (path relative to the optimisation file)'
+        )
+    compare['csv'] = _relative(csv_path)
+    compare['where'] = {str(k): str(v) for k, v in (compare.get('where') or {}).items()}
+    return compare
 
 
 # ---------------------------------------------------------------- the search
@@ -941,15 +1024,11 @@ __all__ = [
 
 # ---------------------------------------------------------------- routines: cost of transport
 
-GRAVITY_M_S2 = 9.81
-
 
 def vehicle_mass_kg(scene) -> float:
-    """Return the vehicle's dry mass (lumped: shell + payload; shell model: vehicle.mass_kg)."""
+    """Return the vehicle's dry mass, kg (lumped: shell + payload; shell: vehicle.mass_kg)."""
     if getattr(scene.model, 'name', '') == 'lumped':
-        from pulsejet_sim.models.lumped import kernels as K
-
-        return float(scene.model.params[K.P_M_SOLID])
+        return scene.model.dry_mass_kg
     return float((scene.data.get('vehicle') or {}).get('mass_kg', math.nan))
 
 
@@ -960,12 +1039,15 @@ def routine_run(scene: str, routine: dict | None, duration_s: float) -> dict:
     This is the executor's unit of work when a routine is trained. It measures:
 
     - distance_m: the integral of the forward velocity over the run (sum of the published samples
-      times the publication period, as `pulsejet sweep` and `pulsejet summary` measure it);
+      times the publication period, `metrics.distance_from_samples_m`, as `pulsejet sweep`
+      measures it);
     - work_j: the actuation work put in, `in_actuation_work` of the energy ledger at the end;
-    - mass_kg: total mass moved = the vehicle's dry mass + the time-mean fluid mass in the cavity;
-    - cost_of_transport: work_j / (mass_kg * 9.81 m/s^2 * distance_m), dimensionless (inf when the
-      vehicle did not move forward).
+    - mass_kg: total mass moved = the vehicle's dry mass + the time-mean fluid mass in the cavity
+      (the mass this cost of transport states; the environments use the rest cavity's water);
+    - cost_of_transport: `metrics.cost_of_transport`, work_j / (mass_kg * 9.81 m/s^2 *
+      distance_m), dimensionless (inf when the vehicle did not move forward).
     """
+    from pulsejet_sim.analysis import metrics
     from pulsejet_sim.scene import load_scene
     from pulsejet_sim.studies.runner import Drive
 
@@ -990,12 +1072,13 @@ def routine_run(scene: str, routine: dict | None, duration_s: float) -> dict:
     if not speeds:
         return out
     dt_pub = drive.batch * drive.sim.model.dt_s
-    out['distance_m'] = sum(speeds) * dt_pub
+    out['distance_m'] = metrics.distance_from_samples_m(speeds, dt_pub)
     out['work_j'] = float(drive.sim.energy_ledger()['in_actuation_work'])
     out['mass_kg'] = vehicle_mass_kg(sc) + sum(fluid) / len(fluid)
     out['simulated_s'] = drive.sim.time_s
     if out['distance_m'] > 0 and not out['fault']:
-        out['cost_of_transport'] = out['work_j'] / (
-            out['mass_kg'] * GRAVITY_M_S2 * out['distance_m']
+        # no minimum distance: a run that did not move forward keeps the inf set above
+        out['cost_of_transport'] = float(
+            metrics.cost_of_transport(out['work_j'], out['distance_m'], out['mass_kg'])
         )
     return out

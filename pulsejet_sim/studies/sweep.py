@@ -100,6 +100,7 @@ def run_one(spec: RunSpec, on_batch: Callable[[Any], None] | None = None) -> Run
     `on_batch(sim)`, if given, is called with the Simulation after each published batch, for a
     caller's own measurements beside the metrics.
     """
+    from pulsejet_sim.analysis import metrics
     from pulsejet_sim.scene import load_scene
     from pulsejet_sim.studies.runner import Drive
 
@@ -126,9 +127,10 @@ def run_one(spec: RunSpec, on_batch: Callable[[Any], None] | None = None) -> Run
     row.simulated_s = drive.sim.time_s
     if speeds:
         row.metrics = {
-            'peak_speed_m_s': max(abs(v) for v in speeds),
-            'mean_speed_m_s': sum(abs(v) for v in speeds) / len(speeds),
-            'distance_m': sum(speeds) * dt_pub,
+            'peak_speed_m_s': metrics.peak_speed_m_s(speeds),
+            # the published samples are equally spaced: their mean, not a time integral
+            'mean_speed_m_s': metrics.sample_mean_speed_m_s(speeds),
+            'distance_m': metrics.distance_from_samples_m(speeds, dt_pub),
             'peak_thrust_n': max(thrusts),
             'max_radius_m': max(radii),
             'volume_min_m3': min(volumes),

@@ -219,6 +219,269 @@ def wall_inertia_kg(rho_s: float, thickness: float, a: float, b: float) -> float
     return rho_s * thickness * value
 
 
+def _checked_sections(
+    scene: Mapping[str, Any]
+) -> tuple[dict[str, dict[str, Any]], tuple[float, float]]:
+    """
+    Return every section checked (SECTION_SPECS; material by check_material), defaults filled in.
+
+    Also the rubber's Mooney-Rivlin constants (C1, C2) in Pa, 0 for the linear spring.
+    """
+    unknown = [k for k in scene if k != 'model' and k not in SECTION_SPECS]
+    if unknown:
+        raise ModelError(
+            f'{unknown[0]}: unknown section for the lumped model; allowed: model, name, '
+            f'description, routine, {", ".join(SECTION_SPECS)}'
+        )
+    sections = {
+        name: check_section(name, scene.get(name), spec)
+        for name, spec in SECTION_SPECS.items()
+        if name != 'material'
+    }
+    sections['material'], rubber_c1, rubber_c2 = check_material(scene.get('material'))
+    return sections, (rubber_c1, rubber_c2)
+
+
+def _check_valve_seat(opening: float) -> None:
+    """Refuse an initial opening below the valve's seat (model_io.VALVE_MIN_OPENING), not 0."""
+    if 0.0 < opening < VALVE_MIN_OPENING:
+        raise ModelError(
+            f'actuator.initial_valve_opening: {opening!r} is out of '
+            'range; '
+            f'allowed: 0 (shut) or a finite number in [{VALVE_MIN_OPENING:g}, 1]'
+        )
+
+
+def _resolve_coupling(opts: dict[str, Any], given_options: Mapping[str, Any]) -> None:
+    """Set options.coupling from its deprecated name energy_model (in place), refusing a clash."""
+    if opts['energy_model']:
+        if 'coupling' in given_options and opts['coupling'] != opts['energy_model']:
+            raise ModelError(
+                f'options.energy_model: {opts["energy_model"]!r} contradicts '
+                'options.coupling: '
+                f'{opts["coupling"]!r}; allowed: only options.coupling (energy_model is its '
+                f'deprecated name), or both with the same value'
+            )
+        opts['coupling'] = opts['energy_model']
+    opts['energy_model'] = opts['coupling']
+
+
+def _check_prolate(g: Mapping[str, Any]) -> None:
+    """Refuse a rest or initial minor semi-axis that is not well below the major one (0.95 a)."""
+    a = g['length_m'] / 2.0
+    for key in ('rest_minor_semi_axis_m', 'initial_minor_semi_axis_m'):
+        value = g[key]
+        if value >= 0.95 * a:
+            raise ModelError(
+                f'geometry.{key}: {value!r} m is not a prolate ellipsoid; allowed: '
+                f'below 0.95 x the major semi-axis ({0.95 * a:g} m)'
+            )
+
+
+def _parameter_vector(g, m, f, act, opts, rubber: tuple[float, float]) -> np.ndarray:
+    """
+    Pack the checked sections into the kernels' parameter vector (K.P_*, SI).
+
+    rubber: the membrane's Mooney-Rivlin (C1, C2), Pa, with material.law neo_hookean or
+    mooney_rivlin (theory/hyperelastic.md).
+
+    Derived values: the shell's mass and wall inertia from its surface, the internal added mass
+    (eq. 7), the nozzle's section, the bounds the kernels stop at, the pump's pressures.
+    """
+    a = g['length_m'] / 2.0
+    b0 = g['rest_minor_semi_axis_m']
+    rho = f['density_kg_m3']
+    r_n = g['nozzle_radius_m']
+    p = np.zeros(K.NP)
+    p[K.P_RHO] = rho
+    p[K.P_MU] = f['viscosity_pa_s']
+    p[K.P_A] = a
+    p[K.P_B0] = b0
+    p[K.P_K] = m['stiffness_n_m']
+    if m['law'] != 'linear':
+        p[K.P_MR_C1], p[K.P_MR_C2] = rubber
+        p[K.P_MEMBRANE_THICKNESS] = m['shell_thickness_m']
+        # no spring: P_K holds the membrane's tangent stiffness at rest (for k_x/k only)
+        p[K.P_K] = K.membrane_spheroid(
+            a, b0, a, b0, rubber[0], rubber[1], m['shell_thickness_m']
+        )[3]
+    p[K.P_M_SOLID] = (
+        m['density_kg_m3'] * spheroid_area_m2(a, b0) * m['shell_thickness_m']
+        + m['payload_mass_kg']
+    )
+    p[K.P_I_B] = wall_inertia_kg(m['density_kg_m3'], m['shell_thickness_m'], a, b0)
+    p[K.P_M_B] = internal_added_mass_kg(rho, a, g['nozzle_inlet_position'])
+    p[K.P_L_N] = g['nozzle_length_m']
+    p[K.P_A_N] = math.pi * r_n * r_n
+    p[K.P_D_N] = 2.0 * r_n
+    p[K.P_K_INLET] = f['inlet_loss_coefficient']
+    p[K.P_CD] = f['drag_coefficient']
+    p[K.P_V_SOLID] = g['solid_volume_m3']
+    p[K.P_C1] = opts['simplified_added_mass_coefficient']
+    p[K.P_PUMP_TAU] = act['pump_time_constant_s']
+    p[K.P_VALVE_RATE] = 1.0 / act['valve_stroke_time_s']
+    p[K.P_B_MIN] = 0.02 * b0
+    p[K.P_B_MAX] = 0.999 * a
+    p[K.P_U_MAX] = 100.0
+    relief, stall = _pump_pressures_pa(act, m, a, b0, rubber)
+    p[K.P_NOZZLE_SECTION] = math.pi * r_n * r_n / (b0 * b0)
+    p[K.P_P_RELIEF] = relief
+    p[K.P_P_STALL] = stall
+    if g['solid_volume_m3'] >= 4.0 / 3.0 * math.pi * a * b0 * b0:
+        raise ModelError(
+            f'geometry.solid_volume_m3: {g["solid_volume_m3"]!r} m^3 fills the rest cavity; '
+            f'allowed: below {4.0 / 3.0 * math.pi * a * b0 * b0:.4g} m^3'
+        )
+    return p
+
+
+def _pump_pressures_pa(
+    act: Mapping[str, Any], m: Mapping[str, Any], a: float, b0: float, rubber: tuple[float, float]
+) -> tuple[float, float]:
+    """
+    Return the pump's (relief, stall) pressures, Pa; -1 given: the shell's at b = 0.8 a and 0.9 a.
+
+    The stall pressure may not exceed the shell's elastic pressure at b = 0.95 a: a stronger pump
+    would inflate the shell past the bound the kernels stop at.
+    """
+
+    def elastic_pressure(b_m):  # k (b - b0) / (dV/db) or dU/db / (dV/db), Pa
+        if m['law'] != 'linear':
+            force = K.membrane_spheroid(
+                a, b0, a, b_m, rubber[0], rubber[1], m['shell_thickness_m']
+            )[2]
+            return force / (8.0 / 3.0 * math.pi * a * b_m)
+        return m['stiffness_n_m'] * (b_m - b0) / (8.0 / 3.0 * math.pi * a * b_m)
+
+    relief = act['pump_relief_pressure_pa']
+    stall = act['pump_stall_pressure_pa']
+    relief = elastic_pressure(0.8 * a) if relief < 0 else relief
+    stall = elastic_pressure(0.9 * a) if stall < 0 else stall
+    limit = elastic_pressure(0.95 * a)
+    if not relief < stall <= limit:
+        raise ModelError(
+            f'actuator.pump_stall_pressure_pa: {stall!r} Pa with relief {relief!r} Pa; '
+            'allowed: '
+            f'relief < stall <= {limit:.6g} Pa (the elastic pressure of the shell at b = 0.95 '
+            'a: a '
+            f'stronger pump inflates it past its bound), or -1 for the defaults'
+        )
+    return relief, stall
+
+
+def _term_and_option_flags(
+    terms: Mapping[str, bool], opts: Mapping[str, Any], law: str
+) -> int:
+    """Return the kernels' bit flags: one bit per switched-on term (TERM_BITS) and option."""
+    flags = 0
+    for name, bit in TERM_BITS.items():
+        if terms[name]:
+            flags |= bit
+    if opts['coupling'] == 'consistent':
+        flags |= K.O_COUPLING_CONSISTENT
+    if opts['added_mass_form'] == 'simplified':
+        flags |= K.O_ADDED_MASS_SIMPLIFIED
+    if opts['nozzle_section'] == 'shell':
+        flags |= K.O_NOZZLE_FOLLOWS_SHELL
+    if law != 'linear':
+        flags |= K.O_HYPERELASTIC
+    return flags
+
+
+# ---- named readings of the kernels' vectors (SI) ------------------------------------------------
+# Environments and studies read the parameter and state vectors through these, not through the
+# kernels' slot numbers (K.P_*, K.Y_*), so a change of the vectors' layout stays inside this model.
+# Each takes one vector or a batch of them along the last axis (the vector environment steps many
+# robots at once) and returns numpy values; the volume formulas keep the kernels' operation order,
+# so the numbers are the same bits the kernels compute.
+
+
+def position_m(state: np.ndarray):
+    """Return the vehicle's position x, m (positive forward)."""
+    return state[..., K.Y_X]
+
+
+def velocity_m_s(state: np.ndarray):
+    """Return the vehicle's forward velocity U, m/s."""
+    return state[..., K.Y_U]
+
+
+def minor_semi_axis_m(state: np.ndarray):
+    """Return the shell's minor semi-axis b, m."""
+    return state[..., K.Y_B]
+
+
+def minor_semi_axis_rate_m_s(state: np.ndarray):
+    """Return db/dt, m/s."""
+    return state[..., K.Y_W]
+
+
+def pump_flow_m3_s(state: np.ndarray):
+    """Return the pump's actual flow (lagging its command), m^3/s."""
+    return state[..., K.Y_QP]
+
+
+def valve_opening(state: np.ndarray):
+    """Return the valve's actual opening, 0 (shut) .. 1."""
+    return state[..., K.Y_VALVE]
+
+
+def pump_work_j(state: np.ndarray):
+    """Return the actuation work the pump has put in since the start, J (in_actuation_work)."""
+    return state[..., K.Y_W_PUMP]
+
+
+def major_semi_axis_m(params: np.ndarray):
+    """Return the shell's major semi-axis a (half its length), m."""
+    return params[..., K.P_A]
+
+
+def minor_semi_axis_bounds_m(params: np.ndarray):
+    """Return (b_min, b_max), m: the minor semi-axes the model accepts before it stops."""
+    return params[..., K.P_B_MIN], params[..., K.P_B_MAX]
+
+
+def speed_bound_m_s(params: np.ndarray):
+    """Return the bound of |U| the model accepts before it stops, m/s."""
+    return params[..., K.P_U_MAX]
+
+
+def solid_volume_m3(params: np.ndarray):
+    """Return the volume inside the shell that water does not fill, m^3."""
+    return params[..., K.P_V_SOLID]
+
+
+def dry_mass_kg(params: np.ndarray):
+    """Return the shell plus payload mass, kg (no water)."""
+    return params[..., K.P_M_SOLID]
+
+
+def cavity_volume_m3(state: np.ndarray, params: np.ndarray):
+    """Return the water volume in the cavity, 4/3 pi a b^2 - V_solid, m^3."""
+    b = state[..., K.Y_B]
+    return 4.0 / 3.0 * math.pi * params[..., K.P_A] * b * b - params[..., K.P_V_SOLID]
+
+
+def rest_cavity_water_kg(params: np.ndarray):
+    """Return the water mass of the cavity at rest, rho (4/3 pi a b0^2 - V_solid), kg."""
+    rest = 4.0 / 3.0 * math.pi * params[..., K.P_A] * params[..., K.P_B0] ** 2 - params[
+        ..., K.P_V_SOLID
+    ]
+    return params[..., K.P_RHO] * rest
+
+
+def scale_minor_semi_axis(state: np.ndarray, params: np.ndarray, factor: float) -> None:
+    """
+    Scale b of one state vector in place by `factor` (a perturbed initial shape).
+
+    A shut valve's cavity moves only with the pump, so db/dt is then set to Q_p / (dV/db), dV/db
+    = 8/3 pi a b, as initial_state does.
+    """
+    state[K.Y_B] *= factor
+    if state[K.Y_VALVE] <= 0.0:
+        state[K.Y_W] = state[K.Y_QP] / (8.0 / 3.0 * math.pi * params[K.P_A] * state[K.Y_B])
+
+
 @dataclass(frozen=True)
 class LumpedModel:
     """Immutable compiled lumped model; the mutable state lives in a numpy vector."""
@@ -238,150 +501,45 @@ class LumpedModel:
 
     @classmethod
     def from_scene(cls, scene: Mapping[str, Any]) -> 'LumpedModel':
-        unknown = [k for k in scene if k != 'model' and k not in SECTION_SPECS]
-        if unknown:
-            raise ModelError(
-                f'{unknown[0]}: unknown section for the lumped model; allowed: model, name, '
-                f'description, routine, {", ".join(SECTION_SPECS)}'
-            )
-        sections = {
-            name: check_section(name, scene.get(name), spec)
-            for name, spec in SECTION_SPECS.items()
-            if name != 'material'
-        }
-        sections['material'], rubber_c1, rubber_c2 = check_material(scene.get('material'))
-        g, m, f, act = (
-            sections['geometry'],
-            sections['material'],
-            sections['fluid'],
-            sections['actuator'],
-        )
-        if (
-            0.0 < act['initial_valve_opening'] < VALVE_MIN_OPENING
-        ):  # below the valve's seat (model_io.VALVE_MIN_OPENING)
-            raise ModelError(
-                f'actuator.initial_valve_opening: {act["initial_valve_opening"]!r} is out of '
-                'range; '
-                f'allowed: 0 (shut) or a finite number in [{VALVE_MIN_OPENING:g}, 1]'
-            )
-        terms, opts = sections['terms'], sections['options']
-        given_options = scene.get('options') or {}
-        if opts['energy_model']:
-            if 'coupling' in given_options and opts['coupling'] != opts['energy_model']:
-                raise ModelError(
-                    f'options.energy_model: {opts["energy_model"]!r} contradicts '
-                    'options.coupling: '
-                    f'{opts["coupling"]!r}; allowed: only options.coupling (energy_model is its '
-                    f'deprecated name), or both with the same value'
-                )
-            opts['coupling'] = opts['energy_model']
-        opts['energy_model'] = opts['coupling']
-        a = g['length_m'] / 2.0
-        b0, b_init = g['rest_minor_semi_axis_m'], g['initial_minor_semi_axis_m']
-        for key, value in (('rest_minor_semi_axis_m', b0), ('initial_minor_semi_axis_m', b_init)):
-            if value >= 0.95 * a:
-                raise ModelError(
-                    f'geometry.{key}: {value!r} m is not a prolate ellipsoid; allowed: '
-                    f'below 0.95 x the major semi-axis ({0.95 * a:g} m)'
-                )
+        """
+        Compile a scene mapping: check every section, then pack the kernels' vectors.
+
+        Raises ModelError naming the key, the value and what is allowed.
+        """
+        sections, rubber = _checked_sections(scene)
+        act, terms, opts = sections['actuator'], sections['terms'], sections['options']
+        _check_valve_seat(act['initial_valve_opening'])
+        _resolve_coupling(opts, scene.get('options') or {})
+        _check_prolate(sections['geometry'])
         if not (terms['shell_inertia'] or terms['internal_added_mass'] or terms['nozzle_inertia']):
             raise ModelError(
                 'terms: shell_inertia, internal_added_mass and nozzle_inertia are all false; '
                 'allowed: at least one of them true (the shell needs inertia)'
             )
-        rho = f['density_kg_m3']
-        r_n = g['nozzle_radius_m']
-        p = np.zeros(K.NP)
-        p[K.P_RHO] = rho
-        p[K.P_MU] = f['viscosity_pa_s']
-        p[K.P_A] = a
-        p[K.P_B0] = b0
-        p[K.P_K] = m['stiffness_n_m']
-        if m['law'] != 'linear':
-            p[K.P_MR_C1] = rubber_c1
-            p[K.P_MR_C2] = rubber_c2
-            p[K.P_MEMBRANE_THICKNESS] = m['shell_thickness_m']
-            # no spring: P_K holds the membrane's tangent stiffness at rest (for k_x/k only)
-            p[K.P_K] = K.membrane_spheroid(
-                a, b0, a, b0, rubber_c1, rubber_c2, m['shell_thickness_m']
-            )[3]
-        p[K.P_M_SOLID] = (
-            m['density_kg_m3'] * spheroid_area_m2(a, b0) * m['shell_thickness_m']
-            + m['payload_mass_kg']
+        p = _parameter_vector(
+            sections['geometry'], sections['material'], sections['fluid'], act, opts, rubber
         )
-        p[K.P_I_B] = wall_inertia_kg(m['density_kg_m3'], m['shell_thickness_m'], a, b0)
-        p[K.P_M_B] = internal_added_mass_kg(rho, a, g['nozzle_inlet_position'])
-        p[K.P_L_N] = g['nozzle_length_m']
-        p[K.P_A_N] = math.pi * r_n * r_n
-        p[K.P_D_N] = 2.0 * r_n
-        p[K.P_K_INLET] = f['inlet_loss_coefficient']
-        p[K.P_CD] = f['drag_coefficient']
-        p[K.P_V_SOLID] = g['solid_volume_m3']
-        p[K.P_C1] = opts['simplified_added_mass_coefficient']
-        p[K.P_PUMP_TAU] = act['pump_time_constant_s']
-        p[K.P_VALVE_RATE] = 1.0 / act['valve_stroke_time_s']
-        p[K.P_B_MIN] = 0.02 * b0
-        p[K.P_B_MAX] = 0.999 * a
-        p[K.P_U_MAX] = 100.0
-        k = m['stiffness_n_m']
-
-        def elastic_pressure(b_m):  # k (b - b0) / (dV/db) or dU/db / (dV/db), Pa
-            if m['law'] != 'linear':
-                force = K.membrane_spheroid(
-                    a, b0, a, b_m, rubber_c1, rubber_c2, m['shell_thickness_m']
-                )[2]
-                return force / (8.0 / 3.0 * math.pi * a * b_m)
-            return k * (b_m - b0) / (8.0 / 3.0 * math.pi * a * b_m)
-
-        relief = act['pump_relief_pressure_pa']
-        stall = act['pump_stall_pressure_pa']
-        relief = elastic_pressure(0.8 * a) if relief < 0 else relief
-        stall = elastic_pressure(0.9 * a) if stall < 0 else stall
-        limit = elastic_pressure(0.95 * a)
-        if not relief < stall <= limit:
-            raise ModelError(
-                f'actuator.pump_stall_pressure_pa: {stall!r} Pa with relief {relief!r} Pa; '
-                'allowed: '
-                f'relief < stall <= {limit:.6g} Pa (the elastic pressure of the shell at b = 0.95 '
-                'a: a '
-                f'stronger pump inflates it past its bound), or -1 for the defaults'
-            )
-        p[K.P_NOZZLE_SECTION] = math.pi * r_n * r_n / (b0 * b0)
-        p[K.P_P_RELIEF] = relief
-        p[K.P_P_STALL] = stall
-        if g['solid_volume_m3'] >= 4.0 / 3.0 * math.pi * a * b0 * b0:
-            raise ModelError(
-                f'geometry.solid_volume_m3: {g["solid_volume_m3"]!r} m^3 fills the rest cavity; '
-                f'allowed: below {4.0 / 3.0 * math.pi * a * b0 * b0:.4g} m^3'
-            )
-        flags = 0
-        for name, bit in TERM_BITS.items():
-            if terms[name]:
-                flags |= bit
-        if opts['coupling'] == 'consistent':
-            flags |= K.O_COUPLING_CONSISTENT
-        if opts['added_mass_form'] == 'simplified':
-            flags |= K.O_ADDED_MASS_SIMPLIFIED
-        if opts['nozzle_section'] == 'shell':
-            flags |= K.O_NOZZLE_FOLLOWS_SHELL
-        if m['law'] != 'linear':
-            flags |= K.O_HYPERELASTIC
         p.setflags(write=False)
         command = Command(act['initial_pump_flow_m3_s'], act['initial_valve_opening'], 0.0)
         sim = sections['simulation']
         return cls(
             params=p,
-            flags=flags,
+            flags=_term_and_option_flags(terms, opts, sections['material']['law']),
             dt_s=sim['dt_s'],
-            initial_b_m=b_init,
+            initial_b_m=sections['geometry']['initial_minor_semi_axis_m'],
             initial_command=command,
             terms=frozenset(n for n in TERM_BITS if terms[n]),
             options=dict(opts),
-            shell_law=m['law'],
+            shell_law=sections['material']['law'],
             integrator=sim['integrator'],
             rtol=sim['rtol'],
             atol=sim['atol'],
         )
+
+    @property
+    def dry_mass_kg(self) -> float:
+        """Shell plus payload mass, kg (no water)."""
+        return float(self.params[K.P_M_SOLID])
 
     # ---- Model protocol ------------------------------------------------------------------------
     def initial_state(self) -> np.ndarray:

@@ -26,6 +26,7 @@ from typing import Any, Mapping
 
 import numpy as np
 from pulsejet_sim.core.model_io import ModelError
+from pulsejet_sim.core.schema import Number
 
 GEOMETRY_KINDS = ('ellipsoid', 'cone', 'cap_cylinder', 'points')
 _DENSE = 4001
@@ -98,22 +99,15 @@ class Profile:
 def _num(
     section: Mapping[str, Any], key: str, where: str, low: float, high: float, default=None
 ) -> float:
+    """Return a geometry number by the one schema rule (core.schema.Number), or ModelError."""
+    allowed = f'a number in [{low}, {high}]'
     if key not in section:
         if default is None:
-            raise ModelError(f'{where}.{key}: missing; allowed: a number in [{low}, {high}]')
+            raise ModelError(f'{where}.{key}: missing; allowed: {allowed}')
         return float(default)
-    value = section[key]
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ModelError(
-            f'{where}.{key}: {value!r} is not a number; allowed: a number in [{low}, {high}]'
-        ) from None
-    if not math.isfinite(v) or v < low or v > high:
-        raise ModelError(
-            f'{where}.{key}: {value!r} is out of range; allowed: a number in [{low}, {high}]'
-        )
-    return v
+    return Number(None, low, high).check(
+        f'{where}.{key}', section[key], from_text=True, allowed=allowed
+    )
 
 
 def _ellipsoid(g):
