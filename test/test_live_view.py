@@ -19,6 +19,7 @@ import json
 import math
 import os
 from pathlib import Path
+import signal
 import struct
 import subprocess
 import sys
@@ -334,7 +335,7 @@ async def _connect_with(port: int, subprotocol: str):
         return ws.subprotocol
 
 
-def test_a_taken_port_is_refused_clearly_and_only_the_sdk_subprotocol_is_spoken():
+def test_a_taken_port_is_refused_ctrl_c_stops_and_only_the_sdk_subprotocol_is_spoken():
     first, port = start_view(SCENE, '--duration', '30', '--port', '0', '--wait-for-client')
     try:
         # foxglove-sdk 0.30 names the protocol foxglove.sdk.v1 and refuses the older name
@@ -348,8 +349,13 @@ def test_a_taken_port_is_refused_clearly_and_only_the_sdk_subprotocol_is_spoken(
             text=True,
             timeout=120,
         )
+        # Ctrl-C stops the first server cleanly (it was waiting for a client)
+        first.send_signal(signal.SIGINT)
+        out, err = first.communicate(timeout=30)
     finally:
-        first.kill()
-        first.wait()
+        if first.poll() is None:
+            first.kill()
+            first.wait()
     assert proc.returncode == 2
     assert f'127.0.0.1:{port}' in proc.stderr and 'did not start' in proc.stderr
+    assert first.returncode == 0 and 'interrupted' in out, (out, err[-2000:])
