@@ -36,14 +36,29 @@ PREAMBLE = (
     'Produced by `benchmarks/bench_viewer.py`; newest last. Target: with pulsejet/mantle_marker '
     "subscribed, sim_node's send-time period jitter p99 (shell_robot, 100 Hz) at most "
     f'{RATIO_MAX:g} x that of an idle process waking on the same grid in the same run.\n\n'
-    '## Before (as the issue was filed, 2026-12, one 30 s run, Marker built from one Python '
-    'Point per vertex)\n\n'
+    '## Before (as issue 26 was filed: one 30 s run, the Marker built from one Python Point per '
+    'vertex)\n\n'
     '| | period jitter p99 |\n|---|---|\n'
     '| velocity stream received, Marker subscribed | 10.0 ms |\n'
     "| sim_node's own send times, Marker subscribed | 9.9 ms |\n"
     '| idle process on the same 100 Hz grid, same 30 s | 3.0 ms (0.6 ms in a quieter minute) |\n'
     '\nratio send / idle: 3.3\n\n'
 )
+
+
+def code_version() -> str:
+    """Return the commit measured (and whether the work tree differed from it)."""
+    import subprocess
+
+    def git(*args):
+        return subprocess.run(
+            ['git', *args], cwd=Path(__file__).resolve().parents[1], capture_output=True, text=True
+        ).stdout.strip()
+
+    commit = git('rev-parse', '--short', 'HEAD') or 'unknown'
+    # the stored results change with every run: not code
+    dirty = git('status', '--porcelain', '--untracked-files=no', '--', '.', ':!benchmarks/results')
+    return commit + (' (with uncommitted changes)' if dirty else '')
 
 
 def measure(args) -> list[dict]:
@@ -139,7 +154,8 @@ def main(argv=None) -> int:
     text = (
         f'## Marker subscribed and not, interleaved, {now:%Y-%m-%d %H:%M UTC}\n\n'
         f'machine: {platform.machine()}, {cpu_model()}, {os.cpu_count()} cores (shared with other'
-        f' jobs), Python {platform.python_version()}\ncommand: `.venv/bin/{command}`\n\n'
+        f' jobs), Python {platform.python_version()}\ncommand: `.venv/bin/{command}`\n'
+        f'code: {code_version()}\n\n'
         + table(runs, args)
     )
     print(text)
