@@ -41,6 +41,9 @@ TOPIC_TF = 'tf'
 TOPIC_POSE = 'pulsejet/pose'
 TOPIC_STATE = 'pulsejet/state'
 TOPIC_COMMAND = 'pulsejet/command'
+#: --wait-for-client starts the run once the client's subscriptions stopped coming for this long (a
+#: panel subscribes to its channels one by one; t = 0 should reach every one)
+SUBSCRIBE_SETTLE_S = 0.3
 #: the colour of sim_node's Marker (r, g, b, a)
 MANTLE_RGBA = (0.95, 0.55, 0.35, 0.8)
 
@@ -162,14 +165,23 @@ class Subscriptions:
 
     def __init__(self):
         self.count = 0
+        self.last_s = 0.0  # monotonic time of the latest subscription
         self.first = threading.Event()
 
     def on_subscribe(self, client, channel) -> None:
         self.count += 1
+        self.last_s = time.monotonic()
         self.first.set()
 
     def on_unsubscribe(self, client, channel) -> None:
         self.count -= 1
+
+    def wait(self, settle_s: float = SUBSCRIBE_SETTLE_S) -> None:
+        """Return once a client subscribed and no further subscription came for settle_s."""
+        while not self.first.wait(0.2):
+            pass
+        while time.monotonic() - self.last_s < settle_s:
+            time.sleep(settle_s / 5)
 
 
 class LiveView:
@@ -217,7 +229,8 @@ class LiveView:
         self.state.log(state_payload(obs, time_ns), log_time=time_ns)
         if command is not None:
             self.command.log(command_payload(command, time_ns), log_time=time_ns)
-        if profile is not None and self.mantle is not None:
+        # the mesh only while someone looks (its Point3 objects are the view's largest cost)
+        if profile is not None and self.mantle is not None and self.mantle.has_sinks():
             self.mantle.log(mantle_scene(*profile, time_ns, body), log_time=time_ns)
 
     def close(self) -> None:
@@ -256,8 +269,7 @@ def serve(
         )
         if wait_for_client:
             out('pulsejet view: waiting for a client to subscribe')
-            while not view.subscriptions.first.wait(0.2):
-                pass
+            view.subscriptions.wait()
         mantle_every = max(1, int(math.ceil(scene.publish_rate_hz / MANTLE_RATE_HZ - 1e-9)))
         start = time.monotonic()
         obs = sim.observe()
