@@ -48,7 +48,7 @@ def tf_message_class():
 
 class LatestJobThread:
     """
-    A thread that runs the latest job handed to it; one handed over while another waits replaces it.
+    A thread that runs the latest job handed to it; a job handed over while one waits replaces it.
 
     For what a viewer alone needs (the mantle Marker): the caller (the pacing thread) only hands
     over its inputs; building and sending happen here, and a viewer too slow to keep up gets fewer

@@ -44,6 +44,9 @@ TOPIC_COMMAND = 'pulsejet/command'
 #: --wait-for-client starts the run once the client's subscriptions stopped coming for this long (a
 #: panel subscribes to its channels one by one; t = 0 should reach every one)
 SUBSCRIBE_SETTLE_S = 0.3
+#: how long close() waits for foxglove's server to stop (once, in a full test run, a stop after
+#: Ctrl-C did not return within 30 s; it could not be reproduced)
+SERVER_STOP_TIMEOUT_S = 5.0
 #: the colour of sim_node's Marker (r, g, b, a)
 MANTLE_RGBA = (0.95, 0.55, 0.35, 0.8)
 
@@ -234,7 +237,17 @@ class LiveView:
             self.mantle.log(mantle_scene(*profile, time_ns, body), log_time=time_ns)
 
     def close(self) -> None:
-        self.server.stop()
+        """Stop the server; say so and go on if it does not stop within SERVER_STOP_TIMEOUT_S."""
+        stopper = threading.Thread(target=self.server.stop, name='foxglove stop', daemon=True)
+        stopper.start()
+        stopper.join(SERVER_STOP_TIMEOUT_S)
+        if stopper.is_alive():
+            print(
+                f'pulsejet view: the server did not stop within {SERVER_STOP_TIMEOUT_S:g} s; '
+                'leaving it to the process exit',
+                file=sys.stderr,
+                flush=True,
+            )
 
 
 def serve(
