@@ -129,6 +129,10 @@ def _decode(buf: bytes, type_name: str, types: dict) -> dict:
 
 
 # -- the server and a client ----------------------------------------------------------------------
+def _sigint_default():
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start_view(*args):
     """Start `pulsejet view` on a free loopback port; return (process, port)."""
     env = dict(os.environ, PYTHONUNBUFFERED='1')
@@ -136,6 +140,9 @@ def start_view(*args):
         [sys.executable, '-m', 'pulsejet_sim.cli', 'view', *args],
         cwd=REPO,
         env=env,
+        # Ctrl-C as in a terminal: a background job of a non-interactive shell (CI) starts its
+        # children with SIGINT ignored, and Python then installs no KeyboardInterrupt for it
+        preexec_fn=_sigint_default,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -358,4 +365,12 @@ def test_a_taken_port_is_refused_ctrl_c_stops_and_only_the_sdk_subprotocol_is_sp
             first.wait()
     assert proc.returncode == 2
     assert f'127.0.0.1:{port}' in proc.stderr and 'did not start' in proc.stderr
-    assert first.returncode == 0 and 'interrupted' in out, (out, err[-2000:])
+    assert first.returncode == 0 and 'interrupted (SIGINT)' in out, (out, err[-2000:])
+
+
+def test_sigterm_stops_the_run_too():
+    proc, _ = start_view(SCENE, '--duration', '30', '--port', '0')
+    time.sleep(1.0)  # running: paced in real time
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0 and 'interrupted (SIGTERM)' in out, (out, err[-2000:])

@@ -26,6 +26,7 @@ import argparse
 import dataclasses
 import ipaddress
 import math
+import signal
 import sys
 import threading
 import time
@@ -368,6 +369,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     return args
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
 def main_view(argv: list[str]) -> int:
     """Entry point of `pulsejet view` (cli.COMMANDS)."""
     args = parse_args(argv)
@@ -382,6 +387,9 @@ def main_view(argv: list[str]) -> int:
         return 2
     from pulsejet_sim.scene import load_scene, SceneError
 
+    if threading.current_thread() is threading.main_thread():
+        # SIGTERM (a service manager, a test harness) stops the run as Ctrl-C does
+        signal.signal(signal.SIGTERM, _interrupt)
     try:
         overrides = {'simulation': {'dt_s': args.dt}} if args.dt is not None else None
         scene = load_scene(args.scene, overrides)
@@ -404,6 +412,6 @@ def main_view(argv: list[str]) -> int:
             file=sys.stderr,
         )
         return 2
-    except KeyboardInterrupt:
-        print('pulsejet view: interrupted', flush=True)
+    except KeyboardInterrupt as err:
+        print(f'pulsejet view: interrupted ({str(err) or "SIGINT"})', flush=True)
         return 0
