@@ -45,8 +45,8 @@ TOPIC_COMMAND = 'pulsejet/command'
 #: --wait-for-client starts the run once the client's subscriptions stopped coming for this long (a
 #: panel subscribes to its channels one by one; t = 0 should reach every one)
 SUBSCRIBE_SETTLE_S = 0.3
-#: how long close() waits for foxglove's server to stop (once, in a full test run, a stop after
-#: Ctrl-C did not return within 30 s; it could not be reproduced)
+#: how long close() waits for foxglove's server to stop before the process goes on to exit (a stop
+#: that hangs must not keep a Ctrl-C from ending the run)
 SERVER_STOP_TIMEOUT_S = 5.0
 #: the colour of sim_node's Marker (r, g, b, a)
 MANTLE_RGBA = (0.95, 0.55, 0.35, 0.8)
