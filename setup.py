@@ -191,9 +191,9 @@ setup(
         ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools'],
-    # `pulsejet sweep|optimize --scheduler tcp://HOST:PORT | --dask-workers N`; pinned in
-    # requirements.txt
-    extras_require={'dask': ['dask[distributed]']},
+    # `pulsejet sweep|optimize --scheduler tcp://HOST:PORT | --dask-workers N`; `pulsejet view`
+    # (Foxglove WebSocket live view); pinned in requirements.txt
+    extras_require={'dask': ['dask[distributed]'], 'view': ['foxglove-sdk']},
     zip_safe=True,
     maintainer='pulsejet maintainers',
     maintainer_email='maintainers@pulsejet.dev',

@@ -3,7 +3,8 @@
 
 `pulsejet run SCENE`, `pulsejet summary FILE.mcap`, `pulsejet plot FILE.mcap`, `pulsejet animate
 FILE.mcap`, `pulsejet resim FILE.mcap`, `pulsejet repair FILE.mcap`, `pulsejet sweep SWEEP`,
-`pulsejet fit FIT`, `pulsejet optimize OPT`, `pulsejet validate [CASE...]`, `pulsejet scenes`.
+`pulsejet fit FIT`, `pulsejet optimize OPT`, `pulsejet validate [CASE...]`, `pulsejet view SCENE`,
+`pulsejet scenes`.
 """
 
 from __future__ import annotations
@@ -111,6 +112,10 @@ COMMANDS = {
     'validate': (
         'predicted against measured figures of real robots: docs/validation/ report',
         _lazy('studies.validation', 'main_validate'),
+    ),
+    'view': (
+        'run a scene in real time, served live to the Foxglove app (WebSocket; no ROS)',
+        _lazy('view.foxglove_live', 'main_view'),
     ),
     'scenes': ('list the scenes under config/', _scenes),
 }

@@ -2,7 +2,7 @@
 The offline tools work where rclpy and the ROS message packages cannot be imported.
 
 docs/ARCHITECTURE.md promises that `pulsejet run|summary|plot|animate|sweep|fit|optimize|resim|
-repair` need no rclpy (a machine with only the PyPI wheels of numpy, mcap and rosbags, a Dask
+repair|view` need no rclpy (a machine with only the PyPI wheels of numpy, mcap and rosbags, a Dask
 worker, CI without ROS). Each sub-command runs here in a subprocess whose interpreter refuses
 rclpy, rcl*, rmw*, rosidl* and every *_msgs / *_interfaces / *_srvs package: a sitecustomize on
 PYTHONPATH inserts a meta-path finder that raises ImportError for them, in the process and in the
@@ -148,3 +148,12 @@ def test_every_offline_subcommand_runs_without_rclpy(without_ros):
     )
     ok('optimize', 'opt.yaml', '--workers', '1', '--out', 'opt')
     assert any((work / 'opt').iterdir())
+
+
+def test_live_view_serves_without_rclpy(without_ros):
+    """`pulsejet view` (Foxglove WebSocket, pulsejet_sim.view) runs and stops without ROS."""
+    proc = without_ros(
+        'view', 'shell_robot', '--duration', '0.3', '--port', '0', '--real-time-factor', '3'
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert 'ws://127.0.0.1:' in proc.stdout and '0.3 s simulated; done' in proc.stdout

@@ -60,7 +60,15 @@ def run(
     scene: str,
     controller: bool,
     lookahead_s: float = 0.0,
+    subscribe_marker: bool = False,
 ) -> dict:
+    """
+    Measure one live run of sim_node (see the module docstring); returns the figures.
+
+    subscribe_marker: also subscribe to pulsejet/mantle_marker as RViz or Foxglove would
+    (reliable), taking the serialised bytes (raw) so this process's own decoding does not load
+    the cores sim_node runs on; the markers received are counted.
+    """
     from pulsejet_sim.ros.executor import make_executor
     from pulsejet_sim.scene import load_scene
     import rclpy
@@ -109,6 +117,18 @@ def run(
     node.create_subscription(
         Clock, '/clock', on_clock, QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     )
+    markers = []
+    if subscribe_marker:
+        from pulsejet_sim.interface import TOPIC_MANTLE_MARKER
+        from visualization_msgs.msg import Marker
+
+        node.create_subscription(
+            Marker,
+            TOPIC_MANTLE_MARKER,
+            lambda data: markers.append((time.monotonic(), len(data))),
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
+            raw=True,
+        )
     try:
         if controller:
             procs.append(
@@ -190,6 +210,9 @@ def run(
         'cpu_percent': float(100 * (cpu1 - cpu0) / (wall1 - wall0)),
         'controller': controller,
         'lookahead_s': lookahead_s,
+        'marker_subscribed': subscribe_marker,
+        'markers_received': sum(1 for t_s, _ in markers if wall0 <= t_s <= wall1),
+        'marker_bytes': markers[-1][1] if markers else 0,
     }
 
 

@@ -51,6 +51,7 @@ from pulsejet_sim.core.topics import (  # noqa: F401  (re-exported: the names of
     TOPIC_VELOCITY,
     TOPIC_VOLUME,
 )
+from pulsejet_sim.view.mesh import mantle_vertices  # noqa: F401  (re-exported)
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -359,27 +360,6 @@ def profile_message(r_m, z_m, time_s: float, frame_id: str = FRAME_ID) -> Polygo
     msg.header.frame_id = frame_id
     msg.polygon.points = [Point32(x=float(z), y=float(r), z=0.0) for r, z in zip(r_m, z_m)]
     return msg
-
-
-def mantle_vertices(r_m, z_m, segments: int = MANTLE_MARKER_SEGMENTS) -> np.ndarray:
-    """
-    Return the mantle surface's triangle vertices, (6 * segments * elements, 3) float64, m.
-
-    The meridian (node radii r_m, axial positions z_m) revolved about the body's x axis in
-    `segments` facets, two triangles per element and facet, in the order mantle_marker lists
-    them: (lower k, upper k, upper k+1), (lower k, upper k+1, lower k+1).
-    """
-    r = np.asarray(r_m, dtype=np.float64)
-    z = np.asarray(z_m, dtype=np.float64)
-    angles = 2.0 * np.pi * np.arange(segments + 1) / segments
-    ring = np.empty((len(r), segments + 1, 3))
-    ring[:, :, 0] = z[:, None]
-    ring[:, :, 1] = r[:, None] * np.cos(angles)
-    ring[:, :, 2] = r[:, None] * np.sin(angles)
-    lower, upper = ring[:-1], ring[1:]
-    k, k1 = slice(0, segments), slice(1, segments + 1)
-    corners = (lower[:, k], upper[:, k], upper[:, k1], lower[:, k], upper[:, k1], lower[:, k1])
-    return np.stack(corners, axis=2).reshape(-1, 3)
 
 
 def _mantle_marker_template(time_s: float, frame_id: str) -> Marker:

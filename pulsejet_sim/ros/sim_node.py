@@ -127,6 +127,7 @@ class SimNode(Node):
     def close(self):
         self.loop.close()
         self._outbox.close()
+        self.out.close()
 
     def on_stop(self, signum):
         if signum is not None:

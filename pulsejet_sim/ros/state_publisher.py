@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import functools
 import math
+import threading
 from typing import Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TransformStamped
 import numpy as np
+from pulsejet_sim.bag.cdr import stamp_ns, TopicEncoder
 from pulsejet_sim.engine.session import observation_is_finite
 from pulsejet_sim.ros import messages
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -42,6 +44,49 @@ def tf_message_class():
     except ImportError:
         return None
     return TFMessage
+
+
+class LatestJobThread:
+    """
+    A thread that runs the latest job handed to it; a job handed over while one waits replaces it.
+
+    For what a viewer alone needs (the mantle Marker): the caller (the pacing thread) only hands
+    over its inputs; building and sending happen here, and a viewer too slow to keep up gets fewer
+    messages instead of delaying the states.
+    """
+
+    def __init__(self, name: str, on_error: Callable[[str], None]):
+        self._cond = threading.Condition()
+        self._job = None
+        self._stop = False
+        self._on_error = on_error
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def submit(self, job: Callable[[], object]) -> None:
+        with self._cond:
+            self._job = job
+            self._cond.notify()
+
+    def close(self, timeout_s: float = 2.0) -> None:
+        """Run the job still waiting, then stop the thread."""
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(timeout_s)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while self._job is None and not self._stop:
+                    self._cond.wait()
+                job, self._job = self._job, None
+                if job is None:  # stopped with nothing left
+                    return
+            try:
+                job()
+            except Exception as exc:  # a publish after shutdown: say it, go on
+                self._on_error(f'{type(exc).__name__}: {exc}')
 
 
 class StatePublisher:
@@ -90,6 +135,18 @@ class StatePublisher:
                 f'odometry on {messages.TOPIC_ODOMETRY} only)'
             )
         self._profile_every = max(1, int(math.ceil(publish_rate_hz / PROFILE_RATE_MAX_HZ - 1e-9)))
+        # the profile's CDR bytes straight from the arrays (bag.cdr, what the offline runner
+        # records): one Point32 object per node cost the pacing thread ~0.6 ms a state
+        self._profile_encoder = TopicEncoder(frame_id=frames[1])
+        # the Marker (~350 kB) is built and sent off the pacing thread
+        self._marker_thread = (
+            LatestJobThread(
+                'mantle marker',
+                lambda text: node.get_logger().warning(f'mantle marker not sent: {text}'),
+            )
+            if self.has_profile
+            else None
+        )
         self._states_built = 0
 
     def topic_names(self) -> list[str]:
@@ -116,8 +173,8 @@ class StatePublisher:
             if not all(np.isfinite(arr).all() for arr in profile):
                 profile = None
         if profile is not None:  # before /clock, which the state's consumers take as its end
-            profile_msg = messages.profile_message(*profile, obs.time_s, self.frames[1])
-            calls.append(self._call(messages.TOPIC_MANTLE_PROFILE, profile_msg))
+            profile_cdr = self._profile_encoder.profile(*profile, stamp_ns(obs.time_s))
+            calls.append(self._call(messages.TOPIC_MANTLE_PROFILE, profile_cdr))
         for topic, msg in messages.observation_messages(obs, self.frames[1], *self.frames):
             calls.append(self._call(topic, msg))
             if topic == messages.TOPIC_ODOMETRY and self.has_tf:
@@ -127,15 +184,25 @@ class StatePublisher:
             marker = self._pubs.get(messages.TOPIC_MANTLE_MARKER)
             # the 3-D view at the ledger's rate, in the body frame, and only while someone
             # looks; serialised from arrays (its ~14000 points as Python objects held the
-            # interpreter ~15 ms), published as those bytes
+            # interpreter ~15 ms) on the marker thread, handed over when the state is sent (so
+            # at its wall time with a lookahead), published as those bytes
             if profile is not None and marker.get_subscription_count():
+                r_m, z_m = (np.array(a, dtype=np.float64) for a in profile)  # this state's
                 calls.append(
                     functools.partial(
-                        marker.publish,
-                        messages.mantle_marker_cdr(*profile, obs.time_s, self.frames[1]),
+                        self._marker_thread.submit,
+                        functools.partial(self._send_marker, marker, r_m, z_m, obs.time_s),
                     )
                 )
         return calls
+
+    def _send_marker(self, publisher, r_m, z_m, time_s: float) -> None:
+        publisher.publish(messages.mantle_marker_cdr(r_m, z_m, time_s, self.frames[1]))
+
+    def close(self) -> None:
+        """Send the Marker still waiting, stop the marker thread."""
+        if self._marker_thread is not None:
+            self._marker_thread.close()
 
     def _transform(self, odometry):
         """Return the odometry's pose as the odom -> body transform (a TFMessage of one)."""

@@ -1,0 +1,1 @@
+"""Live views of a run without ROS (`pulsejet view`: the Foxglove WebSocket protocol)."""
