@@ -2,8 +2,7 @@
 What a viewer costs sim_node's stream: send-time jitter with the mantle Marker subscribed.
 
     .venv/bin/python -m benchmarks.performance.bench_viewer [--repeats 3] [--seconds 30]
-        [--scene shell_robot]
-                                                [--lookahead 0] [--no-write]
+        [--scene shell_robot] [--lookahead 0] [--no-write]
 
 Issue 26, point 5: with pulsejet/mantle_marker subscribed (as RViz or Foxglove would), sim_node's
 send-time period jitter p99 on the default shell scene at 100 Hz must be at most 1.5 times that of
@@ -33,7 +32,8 @@ RESULTS = Path(__file__).resolve().parents[1] / 'results' / 'viewer.md'
 RATIO_MAX = 1.5
 PREAMBLE = (
     '# What a viewer costs the stream (issue 26, point 5)\n\n'
-    'Produced by `benchmarks/performance/bench_viewer.py`; newest last. Target: with pulsejet/mantle_marker '
+    'Produced by `benchmarks/performance/bench_viewer.py`; newest last. Target: with '
+    'pulsejet/mantle_marker '
     "subscribed, sim_node's send-time period jitter p99 (shell_robot, 100 Hz) at most "
     f'{RATIO_MAX:g} x that of an idle process waking on the same grid in the same run.\n\n'
     '## Before (as issue 26 was filed: one 30 s run, the Marker built from one Python Point per '
@@ -148,7 +148,8 @@ def main(argv=None) -> int:
         )
     runs = measure(args)
     command = ' '.join(
-        ['python -m benchmarks.performance.bench_viewer'] + (argv if argv is not None else sys.argv[1:])
+        ['python -m benchmarks.performance.bench_viewer']
+        + (argv if argv is not None else sys.argv[1:])
     )
     now = datetime.datetime.now(datetime.timezone.utc)
     text = (
