@@ -1,4 +1,4 @@
-"""docs/dev/architecture.md's layer table matches the code and the layer contract of test_layers."""
+"""docs/dev/architecture.md's layer table matches the code and the layer contract (test_layers)."""
 
 from __future__ import annotations
 
