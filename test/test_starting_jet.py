@@ -51,7 +51,7 @@ def test_an_impulsive_start_gets_the_discs_added_mass_impulse():
         assert ratio == pytest.approx(expected, rel=0.012), (ratio_ld, ratio, expected)
 
 
-def test_the_impulse_ratio_over_the_stroke_ratio_has_the_measured_trends():
+def test_the_impulse_ratio_is_above_one_and_falls_with_the_stroke_ratio():
     """
     Krueger & Gharib (2003), abstract: ring formation's impulse exceeds the slug model's.
 
