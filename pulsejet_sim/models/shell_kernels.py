@@ -117,7 +117,10 @@ N_MRR, N_MRZ, N_MZZ, N_MTT, N_FIXR, N_FIXZ, N_FIXT, N_WC, N_DAREA, N_HC = (
     8,
     9,
 )
-N_NCOLS = 10
+# paper_code: the node's work-equivalent share of the wall-borne axial load (uniform per reference
+# area over the deformable wall, shares summing to 1; shell.consistent_area_shares)
+N_WWALL = 10
+N_NCOLS = 11
 
 # ---- state tail (after q[3 n1] and v[3 n1]) ------------------------------------------------
 S_X, S_U, S_A, S_IN, S_JET, S_DRAG, S_VISC, S_OTHER = 0, 1, 2, 3, 4, 5, 6, 7
@@ -466,7 +469,8 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
             F[3 * i] += f + fd
             eel += en
             pcont -= fd * vrel[3 * i]
-    # cable: radial inward force with weights wc (sum 1 over free radial dofs)
+    # cable: radial inward force with the work-equivalent shares wc of its line load (the held
+    # ends' shares are the supports', so the free ones sum to less than 1)
     if flags & F_CABLE:
         fc = amp_cmd
         if flags & F_ROUTINE:
@@ -506,10 +510,7 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
         # every node (octopus_derivatives.m: fluid = mod_fluid*[senth;costh;0],
         # zetas_e = [0;0;0;fluid])
         kc = code_rim(Nd)
-        aw = 0.0
         rmx = 0.0
-        for i in range(kc, n1):
-            aw += Nd[i, N_DAREA]
         for i in range(n1):
             if q[3 * i] > rmx:
                 rmx = q[3 * i]
@@ -522,7 +523,7 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
         if flags & F_DRAG:
             load -= 0.5 * P[P_CD] * P[P_RHO] * math.pi * rmx * rmx * abs(U) * U
         for i in range(kc, n1):
-            wi = Nd[i, N_DAREA] / aw
+            wi = Nd[i, N_WWALL]
             F[3 * i + 1] += wi * load
             wrel += wi * vrel[3 * i + 1]
     pst = P[P_PSTAT]
