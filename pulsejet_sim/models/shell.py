@@ -113,7 +113,11 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
 
     coupling:   consistent | paper | paper_code
     simulation: {dt_s, duration_s, integrator: implicit_midpoint|backward_euler|verlet,
-                 newton_tolerance: 1e-9, specialise_kernel: false}
+                 newton_tolerance: 1e-9 (in [1e-14, 1e-4]; relative to the shortest element
+                 per step), specialise_kernel: false,
+                 keep_newton_workspace: false (true: the factorised Newton matrix and the
+                 predictor's history carry over from one advance() call to the next that
+                 continues it, as within one call; implicit integrators only)}
     geometry:   {kind: ellipsoid, semi_axis_axial_m, semi_axis_radial_m, opening_radius_m}
               | {kind: cone, length_m, base_radius_m, tip_radius_m (0.2 base)}
               | {kind: cap_cylinder, cap_radius_m, cap_opening_rad, cylinder_length_m}
@@ -430,6 +434,8 @@ class ShellModel:
         self.mid_node = int(np.argmin(np.abs(profile.X - 0.5 * profile.X[-1])))
         self.substep_events = 0
         self.specialise_kernel = False
+        self.keep_newton_workspace = False
+        self._workspace = None
         self._initial_energy = None
         self._initial_energy = self._stored(self.initial_state())[0]
 
@@ -476,6 +482,20 @@ class ShellModel:
         if not isinstance(spec, bool):
             raise ModelError(
                 f'simulation.specialise_kernel: {spec!r} is not a boolean; allowed: true or false'
+            )
+        keep_ws = sim.get('keep_newton_workspace', False)
+        if not isinstance(keep_ws, bool):
+            raise ModelError(
+                f'simulation.keep_newton_workspace: {keep_ws!r} is not a boolean; allowed: true or '
+                'false'
+            )
+        if keep_ws and (spec or integrator == 'verlet'):
+            raise ModelError(
+                'simulation.keep_newton_workspace: true is not available with '
+                f'integrator: {integrator}, specialise_kernel: {str(spec).lower()} (the kept '
+                'workspace is the implicit schemes\' Newton solve, run by the generic kernel); '
+                'allowed: an implicit integrator with specialise_kernel: false, or '
+                'keep_newton_workspace: false'
             )
 
         mesh = _section(scene, 'mesh')
@@ -894,6 +914,7 @@ class ShellModel:
             duration_s=duration,
         )
         model.specialise_kernel = spec
+        model.keep_newton_workspace = keep_ws
         model.coupling = coupling
         model.outlet = outlet
         model.isotropic_added_mass = code
@@ -972,19 +993,28 @@ class ShellModel:
         if n_steps <= 0:
             return 0
         kern = self._kernel()
+        ws = self._newton_workspace(state) if self.keep_newton_workspace else None
         amp = self._cmd_amp(command)
         t = float(time_s)
         remaining = int(n_steps)
         total = 0
         while remaining > 0:
-            done, code = kern(
-                self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme
-            )
+            if ws is not None:
+                done, code = sk.advance_kept(
+                    self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme,
+                    ws['J'], ws['vprev'], ws['ze'], ws['flags'],
+                )
+            else:
+                done, code = kern(
+                    self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme
+                )
             total += done
             remaining -= done
             t = float(time_s) + total * self.dt_s
             if code == sk.OK:
                 break
+            if ws is not None:
+                ws['flags'][:] = 0.0  # a failed step or sub-steps: start the Newton afresh
             if code == sk.ERR_NEWTON and self.scheme == 1:
                 ok = False
                 for m in (4, 16, 64):
@@ -1008,7 +1038,40 @@ class ShellModel:
                 f'integrator={self.integrator}){self._diagnose(state)}',
                 t,
             )
+        if ws is not None:
+            np.copyto(ws['state'], state)
         return total
+
+    def _newton_workspace(self, state: np.ndarray) -> dict:
+        """
+        Return the Newton workspace kept across ``advance`` calls, started afresh when stale.
+
+        (``simulation.keep_newton_workspace: true``.)  The factorised Newton matrix and the
+        predictor's history continue from the previous call only if this call continues it: the
+        state is the one that call left (bit for bit; a reset, a state set from outside or
+        another simulation of the same model is not) and the parameters, the step among them,
+        are unchanged.  A failed step or a sub-stepped one clears it too (``advance``).
+        """
+        n = 3 * self.n_nodes
+        ws = self._workspace
+        if ws is None or ws['state'].shape != state.shape:
+            ws = self._workspace = {
+                'J': np.zeros((n, 2 * sk.BW + 1)),
+                'vprev': np.zeros(n),
+                'ze': np.zeros(n),
+                'flags': np.zeros(sk.WS_LEN),
+                'state': np.full(state.shape, np.nan),
+                'P': self.P.copy(),
+            }
+        if not (np.array_equal(state, ws['state']) and np.array_equal(self.P, ws['P'])):
+            ws['flags'][:] = 0.0
+            np.copyto(ws['P'], self.P)
+        return ws
+
+    def reset_workspace(self) -> None:
+        """Forget the kept Newton workspace (Simulation.reset calls this)."""
+        if self._workspace is not None:
+            self._workspace['flags'][:] = 0.0
 
     def _diagnose(self, state) -> str:
         """
@@ -1103,9 +1166,9 @@ class ShellModel:
     def observe(self, state: np.ndarray, time_s: float, command: Command) -> Observation:
         n1 = self.n_nodes
         tail = 6 * n1
-        st, _, _, _ = self._eval(state, command)
         T = state[tail:]
-        vol = float(st[sk.T_VOL])
+        # the volume alone, not a whole force evaluation (the same bits as forces' volume)
+        vol = float(sk.cavity_volume(state, n1))
         rho = self.P[sk.P_RHO]
         return Observation(
             time_s=float(time_s),
