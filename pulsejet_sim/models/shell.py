@@ -117,7 +117,8 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
                  per step), specialise_kernel: false,
                  keep_newton_workspace: false (true: the factorised Newton matrix and the
                  predictor's history carry over from one advance() call to the next that
-                 continues it, as within one call; implicit integrators only)}
+                 continues it, as within one call; like newton_tolerance, no effect on
+                 verlet, which has no Newton solve)}
     geometry:   {kind: ellipsoid, semi_axis_axial_m, semi_axis_radial_m, opening_radius_m}
               | {kind: cone, length_m, base_radius_m, tip_radius_m (0.2 base)}
               | {kind: cap_cylinder, cap_radius_m, cap_opening_rad, cylinder_length_m}
@@ -489,13 +490,11 @@ class ShellModel:
                 f'simulation.keep_newton_workspace: {keep_ws!r} is not a boolean; allowed: true or '
                 'false'
             )
-        if keep_ws and (spec or integrator == 'verlet'):
+        if keep_ws and spec:
             raise ModelError(
                 'simulation.keep_newton_workspace: true is not available with '
-                f'integrator: {integrator}, specialise_kernel: {str(spec).lower()} (the kept '
-                'workspace is the implicit schemes\' Newton solve, run by the generic kernel); '
-                'allowed: an implicit integrator with specialise_kernel: false, or '
-                'keep_newton_workspace: false'
+                'specialise_kernel: true (the kept workspace runs the generic kernel); '
+                'allowed: specialise_kernel: false, or keep_newton_workspace: false'
             )
 
         mesh = _section(scene, 'mesh')
@@ -993,7 +992,11 @@ class ShellModel:
         if n_steps <= 0:
             return 0
         kern = self._kernel()
-        ws = self._newton_workspace(state) if self.keep_newton_workspace else None
+        ws = (
+            self._newton_workspace(state)
+            if self.keep_newton_workspace and self.scheme == 1
+            else None
+        )
         amp = self._cmd_amp(command)
         t = float(time_s)
         remaining = int(n_steps)
@@ -1002,7 +1005,7 @@ class ShellModel:
             if ws is not None:
                 done, code = sk.advance_kept(
                     self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme,
-                    ws['J'], ws['vprev'], ws['ze'], ws['flags'],
+                    ws[0], ws[1],
                 )
             else:
                 done, code = kern(
@@ -1013,8 +1016,6 @@ class ShellModel:
             t = float(time_s) + total * self.dt_s
             if code == sk.OK:
                 break
-            if ws is not None:
-                ws['flags'][:] = 0.0  # a failed step or sub-steps: start the Newton afresh
             if code == sk.ERR_NEWTON and self.scheme == 1:
                 ok = False
                 for m in (4, 16, 64):
@@ -1038,40 +1039,32 @@ class ShellModel:
                 f'integrator={self.integrator}){self._diagnose(state)}',
                 t,
             )
-        if ws is not None:
-            np.copyto(ws['state'], state)
         return total
 
-    def _newton_workspace(self, state: np.ndarray) -> dict:
+    def _newton_workspace(self, state: np.ndarray) -> tuple:
         """
-        Return the Newton workspace kept across ``advance`` calls, started afresh when stale.
+        Return the Newton workspace kept across ``advance`` calls: (J, W) of ``sk.advance_kept``.
 
         (``simulation.keep_newton_workspace: true``.)  The factorised Newton matrix and the
         predictor's history continue from the previous call only if this call continues it: the
         state is the one that call left (bit for bit; a reset, a state set from outside or
         another simulation of the same model is not) and the parameters, the step among them,
-        are unchanged.  A failed step or a sub-stepped one clears it too (``advance``).
+        are unchanged; a failed step or a sub-stepped one (the state then differs) starts afresh.
+        ``advance_kept`` checks that; allocated once per model.
         """
-        n = 3 * self.n_nodes
         ws = self._workspace
-        if ws is None or ws['state'].shape != state.shape:
-            ws = self._workspace = {
-                'J': np.zeros((n, 2 * sk.BW + 1)),
-                'vprev': np.zeros(n),
-                'ze': np.zeros(n),
-                'flags': np.zeros(sk.WS_LEN),
-                'state': np.full(state.shape, np.nan),
-                'P': self.P.copy(),
-            }
-        if not (np.array_equal(state, ws['state']) and np.array_equal(self.P, ws['P'])):
-            ws['flags'][:] = 0.0
-            np.copyto(ws['P'], self.P)
+        if ws is None or ws[1].size != sk.workspace_length(self.n_nodes, state.size):
+            ws = self._workspace = (
+                np.zeros((3 * self.n_nodes, 2 * sk.BW + 1)),
+                np.zeros(sk.workspace_length(self.n_nodes, state.size)),
+            )
+            ws[1][sk.WS_LEN:] = np.nan  # no state or parameters left by a previous call
         return ws
 
     def reset_workspace(self) -> None:
         """Forget the kept Newton workspace (Simulation.reset calls this)."""
         if self._workspace is not None:
-            self._workspace['flags'][:] = 0.0
+            self._workspace[1][:sk.WS_LEN] = 0.0
 
     def _diagnose(self, state) -> str:
         """
