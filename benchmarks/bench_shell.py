@@ -1081,11 +1081,11 @@ def main(argv=None) -> int:
         '## The converged answer\n',
         f'Richardson extrapolation over {REF_MESHES[0]}, {REF_MESHES[1]} and {REF_MESHES[2]}'
         f' elements (implicit midpoint, dt {ref_dt:g} s, tolerance {GRID_TOL:g}) with each'
-        ' figure\'s observed order p = log2(|f1 - f2| / |f2 - f3|): f = f3 - (f2 - f3)/(2^p - 1).'
+        " figure's observed order p = log2(|f1 - f2| / |f2 - f3|): f = f3 - (f2 - f3)/(2^p - 1)."
         ' The meshes put a node on the cap/cylinder kink (X/L = 0.13885; 36 k elements): on other'
-        ' meshes the kink\'s place inside its element adds an error of either sign that is not a'
-        ' power of the element size. Error estimate: Roache\'s grid convergence index'
-        f' ({GCI_FS} |f3 - f|) plus the reference step\'s time error |f(2 dt) - f(dt)|/3 at'
+        " meshes the kink's place inside its element adds an error of either sign that is not a"
+        " power of the element size. Error estimate: Roache's grid convergence index"
+        f" ({GCI_FS} |f3 - f|) plus the reference step's time error |f(2 dt) - f(dt)|/3 at"
         f' {REF_MESHES[1]} elements. Checked against {REF_CHECK} elements (also on the kink).\n',
         '| figure | f1 | f2 | f3 | observed order p | converged | error estimate | time-step part'
         f' | {REF_CHECK} el. against converged | {REF_MESHES[2]} el. against converged |',
@@ -1117,8 +1117,8 @@ def main(argv=None) -> int:
             for k in FIGURES
         )
         + '. These meshes put the kink at different places in its element, so their differences'
-        ' mix the element\'s second-order error with the kink\'s position term; the aligned'
-        ' meshes above show the element\'s own order.\n'
+        " mix the element's second-order error with the kink's position term; the aligned"
+        " meshes above show the element's own order.\n"
     )
     pc = pieces
     piece_md = [

@@ -13,6 +13,7 @@ from pulsejet_sim.scene import load_scene, SceneError
 from pulsejet_sim.simulation import Simulation
 import pytest
 
+
 def robot(**simulation):
     sim = {'keep_newton_workspace': True, 'newton_tolerance': 1e-9, **simulation}
     over = {'mesh': {'elements': 16}, 'simulation': sim}
@@ -101,7 +102,8 @@ def test_bad_solver_settings_are_refused_by_name(simulation, words):
 
 def test_verlet_accepts_the_setting_and_has_no_newton_to_keep():
     model = load_scene(
-        'shell_robot', {'simulation': {'integrator': 'verlet', 'dt_s': 1e-6}, 'mesh': {'elements': 8}}
+        'shell_robot',
+        {'simulation': {'integrator': 'verlet', 'dt_s': 1e-6}, 'mesh': {'elements': 8}},
     ).model
     assert model.keep_newton_workspace
     sim = Simulation(model)

@@ -167,7 +167,9 @@ conjugate.  The added mass and the tangential drag use the node's area ``A_i`` (
 adjacent element's ``2 pi r0_m ds``): a nodal (row-sum) quadrature of ``int f N_i dA`` whose
 shares differ from the exact ``2 pi ds (2 r_i + r_j)/6`` by O(ds^2) relative and sum to the exact
 area, second order like the elements.  ``paper_code``'s wall-borne axial load takes the exact
-consistent shares of the wall from the rim on (``consistent_area_shares``).  The muscle routine lowers the
+consistent shares of the wall from the rim on (``consistent_area_shares``).
+
+The muscle routine lowers the
 desired hoop stretch to ``tau_d = 1 - amplitude a(t) s(X)`` (``s`` = 1 with smooth tapers at the
 ends, at the pole only for ``constant_depth_to_edge``); the work it does is ``dW/dt`` at fixed
 shape.
@@ -364,7 +366,7 @@ def consistent_line_load(X: np.ndarray, density: np.ndarray, start: int = 0) -> 
 
 def consistent_area_shares(r0: np.ndarray, ds: np.ndarray, start: int = 0) -> np.ndarray:
     """
-    Return the work-equivalent nodal shares of a load uniform per unit reference area, summing to 1.
+    Return the work-equivalent nodal shares of a load uniform per reference area (sum 1).
 
     The surface of revolution of the (straight) elements from node ``start`` on: node a of an
     element of chord ``ds`` gets ``int N_a 2 pi r dS = 2 pi ds (2 r_a + r_b)/6``, node b
@@ -487,8 +489,8 @@ class ShellModel:
         keep_ws = sim.get('keep_newton_workspace', False)
         if not isinstance(keep_ws, bool):
             raise ModelError(
-                f'simulation.keep_newton_workspace: {keep_ws!r} is not a boolean; allowed: true or '
-                'false'
+                f'simulation.keep_newton_workspace: {keep_ws!r} is not a boolean; '
+                'allowed: true or false'
             )
         if keep_ws and spec:
             raise ModelError(

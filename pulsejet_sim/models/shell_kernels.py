@@ -1460,7 +1460,7 @@ def advance_specialised(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
 
 @njit(cache=True, nogil=True)
 def cavity_volume(q, n1):
-    """Cavity volume, m^3: ``volume_grad``'s V with the same operations (same bits), no gradient."""
+    """Cavity volume, m^3: ``volume_grad``'s V by the same operations (same bits), no gradient."""
     V = 0.0
     for e in range(n1 - 1):
         ra = q[3 * e]
