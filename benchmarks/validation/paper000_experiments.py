@@ -150,9 +150,10 @@ def hoop_tension(spec: RunSpec) -> RunSpec:
 
     A hoop resultant T on a strip of reference meridian dX does work -2 pi T dX r' (the ring's
     circumference is 2 pi r): an inward radial force 2 pi T per metre of meridian, whatever the
-    wall's stiffness or shape. That is the `uniform` cable (equal weights per node, half at a free
-    edge) with a total pull of 2 pi T times the reference meridian length; the routine's period
-    and triangle stay the study's (the same line of the code gives both).
+    wall's stiffness or shape. That is the `uniform` cable (its work-equivalent nodal shares: equal
+    per interior node, half at a free edge, the pole's half to the axis) with a total pull of 2 pi
+    T times the reference meridian length; the routine's period and triangle stay the study's
+    (the same line of the code gives both).
     """
     from pulsejet_sim.scene import load_scene
 

@@ -19,6 +19,9 @@ class Simulation:
     def reset(self) -> Observation:
         """Back to the scene's initial state, time zero, ledger cleared."""
         self.initial_state = self.model.initial_state()
+        forget = getattr(self.model, 'reset_workspace', None)
+        if forget is not None:
+            forget()  # a kept solver workspace (the shell's Newton) belongs to the old run
         self.state = self.initial_state.copy()
         self.steps = 0
         self.command = self.default_command

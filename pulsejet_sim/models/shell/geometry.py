@@ -1,7 +1,7 @@
 """
 Reference meridian profiles of the axisymmetric mantle (paper 000), sampled at N+1 nodes.
 
-Conventions (shared with shell_kernels.py)
+Conventions (shared with shell/kernels.py)
 -----------------------------------------
 * Body axis ``z`` points forward (the swimming direction).  The meridian runs from the **pole**
   (node 0, on the axis ``r = 0``, the front tip of the mantle) to the **ring** (node N), where the

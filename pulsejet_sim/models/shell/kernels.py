@@ -120,7 +120,10 @@ N_MRR, N_MRZ, N_MZZ, N_MTT, N_FIXR, N_FIXZ, N_FIXT, N_WC, N_DAREA, N_HC = (
     8,
     9,
 )
-N_NCOLS = 10
+# paper_code: the node's work-equivalent share of the wall-borne axial load (uniform per reference
+# area over the deformable wall, shares summing to 1; shell.consistent_area_shares)
+N_WWALL = 10
+N_NCOLS = 11
 
 # ---- state tail (after q[3 n1] and v[3 n1]) ------------------------------------------------
 S_X, S_U, S_A, S_IN, S_JET, S_DRAG, S_VISC, S_OTHER = 0, 1, 2, 3, 4, 5, 6, 7
@@ -157,6 +160,9 @@ N_STATS = 13
 # blow-up codes
 OK, ERR_NONFINITE, ERR_AXIS, ERR_BOUNDS, ERR_NEWTON, ERR_FOLD = 0, 1, 2, 3, 4, 5
 BW = 5  # half bandwidth of the dof ordering
+# the Newton workspace's flags (advance_kept): a reusable factorisation, a predictor history
+WS_HAVE_LU, WS_HAVE_PREV = 0, 1
+WS_LEN = 2
 
 
 @njit(cache=True, nogil=True)
@@ -472,7 +478,8 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
             F[3 * i] += f + fd
             eel += en
             pcont -= fd * vrel[3 * i]
-    # cable: radial inward force with weights wc (sum 1 over free radial dofs)
+    # cable: radial inward force with the work-equivalent shares wc of its line load (the held
+    # ends' shares are the supports', so the free ones sum to less than 1)
     if flags & F_CABLE:
         fc = amp_cmd
         if flags & F_ROUTINE:
@@ -512,10 +519,7 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
         # every node (octopus_derivatives.m: fluid = mod_fluid*[senth;costh;0],
         # zetas_e = [0;0;0;fluid])
         kc = code_rim(Nd)
-        aw = 0.0
         rmx = 0.0
-        for i in range(kc, n1):
-            aw += Nd[i, N_DAREA]
         for i in range(n1):
             if q[3 * i] > rmx:
                 rmx = q[3 * i]
@@ -528,7 +532,7 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
         if flags & F_DRAG:
             load -= 0.5 * P[P_CD] * P[P_RHO] * math.pi * rmx * rmx * abs(U) * U
         for i in range(kc, n1):
-            wi = Nd[i, N_DAREA] / aw
+            wi = Nd[i, N_WWALL]
             F[3 * i + 1] += wi * load
             wrel += wi * vrel[3 * i + 1]
     pst = P[P_PSTAT]
@@ -985,7 +989,17 @@ def _paper_vehicle_midpoint(flags, st, U, alpha, dt, P, impulse):
 
 
 @njit(cache=True, nogil=True)
-def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
+def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vprev, ze, ws):
+    """
+    Advance ``state`` by ``n_steps`` (see ``advance``) with the Newton workspace given.
+
+    The workspace: ``J`` the factorised Newton matrix, ``vprev`` the predictor's previous
+    velocities, ``ze`` = J^-1 of the vehicle's unit row, ``ws[WS_HAVE_LU]`` (1: ``J`` holds a
+    factorisation that may be reused) and ``ws[WS_HAVE_PREV]`` (1: ``vprev`` holds the velocities
+    at the start of the previous step).  Fresh zeros give exactly the per-call behaviour; passing
+    the workspace a previous call left behind continues that call's modified Newton (its
+    factorisation and predictor) as if the two calls were one.
+    """
     n1 = Nd.shape[0]
     n = 3 * n1
     tail = 6 * n1
@@ -1006,19 +1020,17 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     gf = np.empty(n)
     K = np.zeros((n, 2 * BW + 1))
     C = np.zeros((n, 2 * BW + 1))
-    J = np.zeros((n, 2 * BW + 1))
     alpha = P[P_ALPHA]
     maxit = int(P[P_MAXIT])
-    vprev = np.empty(n)
     wz = np.zeros(n)  # paper_code: the axial load's weights (area shares), rank-one Jacobian term
     if flags & F_CODE:
         kc = code_rim(Nd)
-        aw = 0.0
         for i in range(kc, n1):
-            aw += Nd[i, N_DAREA]
-        for i in range(kc, n1):
-            wz[3 * i + 1] = Nd[i, N_DAREA] / aw
-    have_lu = False  # the factorised Newton matrix is reused across steps (modified Newton)
+            wz[3 * i + 1] = Nd[i, N_WWALL]
+    # the factorised Newton matrix is reused across steps (modified Newton) and, with a kept
+    # workspace, across calls
+    have_lu = ws[WS_HAVE_LU] > 0.5
+    have_prev = ws[WS_HAVE_PREV] > 0.5
     # the water inside: 1/2 rho Lambda Q^2 with Q = grad V . v_rel (docs/PHYSICS_SHELL.md,
     # "Experiment I"); Lagrange's equation gives the impulse rho Lambda (Q_end - Q_start) grad V
     rho_lam = P[P_RHO] * P[P_LAMBDA]
@@ -1031,8 +1043,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     rho_lam_now = rho_lam  # the Newton matrix's inertia of the water inside
     # experiment K: that water's momentum relative to the body, rho S Q along +z
     rho_s = P[P_RHO] * P[P_SMOM]
-    e_u = np.zeros(n)  # the vehicle's unit row, and J^-1 of it (consistent coupling)
-    ze = np.zeros(n)
+    e_u = np.zeros(n)  # the vehicle's unit row (J^-1 of it: ze, consistent coupling)
     for step in range(n_steps):
         t = time0 + step * dt
         for k in range(n):
@@ -1093,8 +1104,10 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
             ts = t + alpha * dt
             for k in range(n):
                 # predictor: extrapolate the velocity change of the previous step
-                vs[k] = vn[k] + alpha * (vn[k] - vprev[k]) if step > 0 else vn[k]
+                vs[k] = vn[k] + alpha * (vn[k] - vprev[k]) if have_prev else vn[k]
                 vprev[k] = vn[k]
+            have_prev = True
+            ws[WS_HAVE_PREV] = 1.0
             vs[rz] = Us
             q_start = 0.0  # the water's volume rate at the start of the step, m^3/s
             if rho_lam > 0.0:
@@ -1421,6 +1434,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
         state[tail + S_TIME] = t + dt
         if flags & F_JET:
             state[tail + S_UJ] = -vdot / (st[T_AOUT] if vdot < 0 else P[P_AIN])
+        ws[WS_HAVE_LU] = 1.0 if have_lu else 0.0
     return n_steps, OK
 
 
@@ -1432,7 +1446,63 @@ def advance(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme):
     The state is only written after a step passed its checks, so it is left at the last good step.
     ``flags`` is a runtime value here: one compilation (~20 s, cached on disk) serves every scene.
     """
-    return _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
+    n = 3 * Nd.shape[0]
+    return _advance_impl(
+        flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme,
+        np.zeros((n, 2 * BW + 1)), np.empty(n), np.zeros(n), np.zeros(WS_LEN),
+    )
+
+
+def workspace_length(n1, n_state):
+    """Length of ``advance_kept``'s workspace vector for ``n1`` nodes and a state of n_state."""
+    return WS_LEN + 6 * n1 + n_state + N_PARAMS
+
+
+@njit(cache=True, nogil=True)
+def advance_kept(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, W):
+    """
+    Advance like ``advance``, continuing the Newton workspace of the previous call.
+
+    ``J`` (the factorised Newton matrix) and ``W`` = [flags (WS_LEN) | predictor history (3 n1) |
+    J^-1 of the vehicle row (3 n1) | the state the last call left | the parameters it ran with]
+    are owned by the caller (``workspace_length``) and updated in place.  The factorisation and
+    the predictor carry over only when this call continues the last one: the state bit for bit
+    the one it left and the same parameters (the step among them); otherwise, and after a failed
+    step, the solve starts afresh.  Calls that continue one another thus give the bits of one call
+    over all their steps.  The check and the bookkeeping run here, not in Python, to keep the
+    per-call cost of a 10 ms publication period small.
+    """
+    n = 3 * Nd.shape[0]
+    ns = state.size
+    o_prev = WS_LEN
+    o_ze = o_prev + n
+    o_snap = o_ze + n
+    o_par = o_snap + ns
+    same = True
+    for k in range(ns):
+        if state[k] != W[o_snap + k]:
+            same = False
+            break
+    if same:
+        for k in range(P.size):
+            if P[k] != W[o_par + k]:
+                same = False
+                break
+    if not same:
+        for k in range(WS_LEN):
+            W[k] = 0.0
+        for k in range(P.size):
+            W[o_par + k] = P[k]
+    done, code = _advance_impl(
+        flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J,
+        W[o_prev:o_ze], W[o_ze:o_snap], W[:WS_LEN],
+    )
+    if code != OK:
+        for k in range(WS_LEN):
+            W[k] = 0.0
+    for k in range(ns):
+        W[o_snap + k] = state[k]
+    return done, code
 
 
 @njit(cache=True, nogil=True)
@@ -1445,7 +1515,26 @@ def advance_specialised(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
     compilation per distinct flag set (cached on disk).  Selected by
     ``simulation.specialise_kernel: true``.
     """
-    return _advance_impl(literally(flags), state, time0, n_steps, amp_cmd, E, Nd, P, scheme)
+    n = 3 * Nd.shape[0]
+    return _advance_impl(
+        literally(flags), state, time0, n_steps, amp_cmd, E, Nd, P, scheme,
+        np.zeros((n, 2 * BW + 1)), np.empty(n), np.zeros(n), np.zeros(WS_LEN),
+    )
+
+
+@njit(cache=True, nogil=True)
+def cavity_volume(q, n1):
+    """Cavity volume, m^3: ``volume_grad``'s V by the same operations (same bits), no gradient."""
+    V = 0.0
+    for e in range(n1 - 1):
+        ra = q[3 * e]
+        za = q[3 * e + 1]
+        rb = q[3 * e + 3]
+        zb = q[3 * e + 4]
+        S = ra * ra + ra * rb + rb * rb
+        dz = za - zb
+        V += math.pi / 3.0 * S * dz
+    return V
 
 
 @njit(cache=True, nogil=True)

@@ -9,7 +9,7 @@ Model
 is cut into N equal elements; every node carries ``(r, z, theta)``; strains, the Kelvin-Voigt law
 (half-thickness h, ``Psi = 2Eh/(1-nu^2)``, ``Psi2 = 6 eta_v h/(1-nu^2)``, ``Js = h^2/3``,
 ``q = 2hG eta + 2h eta_v eta_dot``) and their discrete energy/dissipation are documented in
-shell_kernels.py.  Internal forces are exact gradients of the discrete elastic energy, the viscous
+shell/kernels.py.  Internal forces are exact gradients of the discrete elastic energy, the viscous
 ones come from a dissipation function, so the scheme conserves energy by construction when the
 viscosity and the fluid loads are off (tested).
 
@@ -113,7 +113,12 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
 
     coupling:   consistent | paper | paper_code
     simulation: {dt_s, duration_s, integrator: implicit_midpoint|backward_euler|verlet,
-                 newton_tolerance: 1e-9, specialise_kernel: false}
+                 newton_tolerance: 1e-9 (in [1e-14, 1e-4]; relative to the shortest element
+                 per step), specialise_kernel: false,
+                 keep_newton_workspace: false (true: the factorised Newton matrix and the
+                 predictor's history carry over from one advance() call to the next that
+                 continues it, as within one call; like newton_tolerance, no effect on
+                 verlet, which has no Newton solve)}
     geometry:   {kind: ellipsoid, semi_axis_axial_m, semi_axis_radial_m, opening_radius_m}
               | {kind: cone, length_m, base_radius_m, tip_radius_m (0.2 base)}
               | {kind: cap_cylinder, cap_radius_m, cap_opening_rad, cylinder_length_m}
@@ -152,9 +157,22 @@ Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated
 
 The cable routine: activation ``a(t)`` rises as a half cosine (``pulse: triangle``: a straight
 line) over ``contraction_s``, falls over ``release_s`` and rests for the rest of the period; the
-cable pull is ``amplitude * a(t)`` distributed over the free nodes with weights uniform,
+cable pull is ``amplitude * a(t)``, a line load along the meridian whose density is uniform,
 proportional to X/L (``rising``: largest at the ring) or to 1 - X/L (``falling``: largest at the
-pole).  The muscle routine lowers the
+pole); every node takes its work-equivalent (consistent) share ``int f N_i dX`` and the held ends'
+shares go to the supports (``consistent_line_load``), so the nodal loads have the continuous
+load's total and first moment at any mesh and the mesh error is second order.
+
+*The other distributed loads, checked the same way.*  The muscle acts through each element's
+desired hoop stretch inside the element energy (one-point quadrature like the elastic terms: no
+nodal lumping).  The cavity pressure is ``p grad V`` of the discrete volume, its exact work
+conjugate.  The added mass and the tangential drag use the node's area ``A_i`` (half of each
+adjacent element's ``2 pi r0_m ds``): a nodal (row-sum) quadrature of ``int f N_i dA`` whose
+shares differ from the exact ``2 pi ds (2 r_i + r_j)/6`` by O(ds^2) relative and sum to the exact
+area, second order like the elements.  ``paper_code``'s wall-borne axial load takes the exact
+consistent shares of the wall from the rim on (``consistent_area_shares``).
+
+The muscle routine lowers the
 desired hoop stretch to ``tau_d = 1 - amplitude a(t) s(X)`` (``s`` = 1 with smooth tapers at the
 ends, at the pole only for ``constant_depth_to_edge``); the work it does is ``dW/dt`` at fixed
 shape.
@@ -348,6 +366,57 @@ def muscle_shape(
     return np.minimum(depth, 0.95 / amp) if amp > 0 else depth
 
 
+def consistent_line_load(X: np.ndarray, density: np.ndarray, start: int = 0) -> np.ndarray:
+    """
+    Return the work-equivalent nodal shares of a line load along the meridian, summing to 1.
+
+    ``density`` gives the load per unit reference arc length at the nodes ``X`` (any scale; it is
+    linear between nodes, which holds exactly for the cable's uniform, rising and falling
+    distributions); the load acts on ``X >= X[start]`` (the deformable wall).  Node i receives
+    ``int f N_i dX / int f dX`` with N_i the linear element's hat function: the consistent nodal
+    load vector of the finite element method (Zienkiewicz, Taylor & Zhu, The Finite Element
+    Method: Its Basis and Fundamentals, 7th ed., sec. 3.2-3.3, "equivalent nodal forces"; Hughes,
+    The Finite Element Method, sec. 1.10 and 3.8, the load vector ``F_i = int N_i f``), integrated
+    exactly on each element: ``h (2 f_a + f_b)/6`` to its first node, ``h (f_a + 2 f_b)/6`` to its
+    second.  The shares therefore reproduce the continuous load's total and its first moment
+    ``int X f dX`` exactly at any mesh (sum_i N_i = 1, sum_i X_i N_i = X).  Shares of nodes that
+    are held (the pole's r, a clamped ring) are the supports' part of the load: the caller drops
+    them, they do not go to the free nodes (lumping them there was the first-order mesh error of
+    issue 23).
+    """
+    X = np.asarray(X, dtype=float)
+    f = np.asarray(density, dtype=float)
+    out = np.zeros(X.size)
+    h = np.diff(X)[start:]
+    fa = f[start:-1]
+    fb = f[start + 1:]
+    out[start:-1] += h * (2.0 * fa + fb) / 6.0
+    out[start + 1:] += h * (fa + 2.0 * fb) / 6.0
+    total = float(np.sum(h * (fa + fb) / 2.0))
+    if total <= 0.0:
+        return out
+    return out / total
+
+
+def consistent_area_shares(r0: np.ndarray, ds: np.ndarray, start: int = 0) -> np.ndarray:
+    """
+    Return the work-equivalent nodal shares of a load uniform per reference area (sum 1).
+
+    The surface of revolution of the (straight) elements from node ``start`` on: node a of an
+    element of chord ``ds`` gets ``int N_a 2 pi r dS = 2 pi ds (2 r_a + r_b)/6``, node b
+    ``2 pi ds (r_a + 2 r_b)/6`` (r linear along the chord), the consistent load vector of
+    ``consistent_line_load`` with the density 2 pi r (same references).
+    """
+    r0 = np.asarray(r0, dtype=float)
+    out = np.zeros(r0.size)
+    d = np.asarray(ds, dtype=float)[start:]
+    ra = r0[start:-1]
+    rb = r0[start + 1:]
+    out[start:-1] += d * (2.0 * ra + rb) / 6.0
+    out[start + 1:] += d * (ra + 2.0 * rb) / 6.0
+    return out / float(np.sum(d * (ra + rb) / 2.0))
+
+
 class ShellModel:
     """Axisymmetric Reissner shell mantle + jet + vehicle (implements the Model protocol)."""
 
@@ -402,6 +471,8 @@ class ShellModel:
         self.mid_node = int(np.argmin(np.abs(profile.X - 0.5 * profile.X[-1])))
         self.substep_events = 0
         self.specialise_kernel = False
+        self.keep_newton_workspace = False
+        self._workspace = None
         self._initial_energy = None
         self._initial_energy = self._stored(self.initial_state())[0]
 
@@ -448,6 +519,18 @@ class ShellModel:
         if not isinstance(spec, bool):
             raise ModelError(
                 f'simulation.specialise_kernel: {spec!r} is not a boolean; allowed: true or false'
+            )
+        keep_ws = sim.get('keep_newton_workspace', False)
+        if not isinstance(keep_ws, bool):
+            raise ModelError(
+                f'simulation.keep_newton_workspace: {keep_ws!r} is not a boolean; '
+                'allowed: true or false'
+            )
+        if keep_ws and spec:
+            raise ModelError(
+                'simulation.keep_newton_workspace: true is not available with '
+                'specialise_kernel: true (the kept workspace runs the generic kernel); '
+                'allowed: specialise_kernel: false, or keep_newton_workspace: false'
             )
 
         mesh = _section(scene, 'mesh')
@@ -695,6 +778,9 @@ class ShellModel:
             Nd[-1, sk.N_FIXZ] = 0.0
             free[: code_rim + 1] = False
             shell_free_mass = float(m[code_rim + 1:].sum())
+            # the wall-borne load per reference area, on the wall from the rim on only (the
+            # rim's share of the cap's element is not wall): its work-equivalent nodal shares
+            Nd[:, sk.N_WWALL] = consistent_area_shares(r0, ds, code_rim)
 
         # ---- vehicle
         total = _num(veh, 'mass_kg', 'vehicle', 1e-6, 1e6, default=2.0 * shell_free_mass)
@@ -757,17 +843,16 @@ class ShellModel:
                 dist = _choice(act, 'distribution', 'actuation', DISTRIBUTIONS, 'uniform')
                 xi = X / X[-1]
                 shape = {'uniform': np.ones(n1), 'rising': xi, 'falling': 1.0 - xi}[dist]
-                w = shape * free
-                if free_edge:
-                    # the load is distributed along the meridian: a free end node carries half an
-                    # element's share (trapezoidal rule), interior nodes a whole one (equal
-                    # elements)
-                    w[-1] *= 0.5
+                # the pull is a line load along the deformable meridian (from the pole, or from
+                # paper_code's clamped rim) of total ``amplitude``; each node takes its
+                # work-equivalent share and the held ends' shares go to the supports, so the
+                # discrete load converges to the continuous one at the element's own order
+                w = consistent_line_load(X, shape, code_rim) * free
                 if w.sum() <= 0:
                     raise ModelError(
                         f'actuation.distribution: {dist!r} loads no free node; allowed: uniform'
                     )
-                Nd[:, sk.N_WC] = w / w.sum()
+                Nd[:, sk.N_WC] = w
                 actuation['distribution'] = dist
                 force_high = Command.LIMITS['cable_force_n'][1]
                 if (
@@ -877,6 +962,7 @@ class ShellModel:
             duration_s=duration,
         )
         model.specialise_kernel = spec
+        model.keep_newton_workspace = keep_ws
         model.coupling = coupling
         model.outlet = outlet
         model.isotropic_added_mass = code
@@ -955,14 +1041,25 @@ class ShellModel:
         if n_steps <= 0:
             return 0
         kern = self._kernel()
+        ws = (
+            self._newton_workspace(state)
+            if self.keep_newton_workspace and self.scheme == 1
+            else None
+        )
         amp = self._cmd_amp(command)
         t = float(time_s)
         remaining = int(n_steps)
         total = 0
         while remaining > 0:
-            done, code = kern(
-                self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme
-            )
+            if ws is not None:
+                done, code = sk.advance_kept(
+                    self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme,
+                    ws[0], ws[1],
+                )
+            else:
+                done, code = kern(
+                    self.flags, state, t, remaining, amp, self.E, self.Nd, self.P, self.scheme
+                )
             total += done
             remaining -= done
             t = float(time_s) + total * self.dt_s
@@ -992,6 +1089,31 @@ class ShellModel:
                 t,
             )
         return total
+
+    def _newton_workspace(self, state: np.ndarray) -> tuple:
+        """
+        Return the Newton workspace kept across ``advance`` calls: (J, W) of ``sk.advance_kept``.
+
+        (``simulation.keep_newton_workspace: true``.)  The factorised Newton matrix and the
+        predictor's history continue from the previous call only if this call continues it: the
+        state is the one that call left (bit for bit; a reset, a state set from outside or
+        another simulation of the same model is not) and the parameters, the step among them,
+        are unchanged; a failed step or a sub-stepped one (the state then differs) starts afresh.
+        ``advance_kept`` checks that; allocated once per model.
+        """
+        ws = self._workspace
+        if ws is None or ws[1].size != sk.workspace_length(self.n_nodes, state.size):
+            ws = self._workspace = (
+                np.zeros((3 * self.n_nodes, 2 * sk.BW + 1)),
+                np.zeros(sk.workspace_length(self.n_nodes, state.size)),
+            )
+            ws[1][sk.WS_LEN:] = np.nan  # no state or parameters left by a previous call
+        return ws
+
+    def reset_workspace(self) -> None:
+        """Forget the kept Newton workspace (Simulation.reset calls this)."""
+        if self._workspace is not None:
+            self._workspace[1][:sk.WS_LEN] = 0.0
 
     def _diagnose(self, state) -> str:
         """
@@ -1086,9 +1208,9 @@ class ShellModel:
     def observe(self, state: np.ndarray, time_s: float, command: Command) -> Observation:
         n1 = self.n_nodes
         tail = 6 * n1
-        st, _, _, _ = self._eval(state, command)
         T = state[tail:]
-        vol = float(st[sk.T_VOL])
+        # the volume alone, not a whole force evaluation (the same bits as forces' volume)
+        vol = float(sk.cavity_volume(state, n1))
         rho = self.P[sk.P_RHO]
         return Observation(
             time_s=float(time_s),
