@@ -26,6 +26,7 @@ import sys
 import time
 
 import numpy as np
+from pulsejet_sim.scene import load_scene_data
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
@@ -33,6 +34,8 @@ SUBPROTOCOL = 'foxglove.sdk.v1'
 OP_MESSAGE_DATA = 0x01
 OP_TIME = 0x02
 SCENE = 'shell_robot'
+#: the scene's mesh, as its file says (the Marker has one band of facets per element)
+MESH_ELEMENTS = load_scene_data(SCENE)[0]['mesh']['elements']
 DURATION_S = 0.6
 
 websockets = pytest.importorskip('websockets')
@@ -301,7 +304,10 @@ def test_mantle_scene_is_the_revolved_meridian(live_run):
             [[p.get('x', 0.0), p.get('y', 0.0), p.get('z', 0.0)] for p in triangles['points']]
         )
         expected = mantle_vertices(*offline[log_time][1])
-        assert points.shape == expected.shape == (6 * 24 * 100, 3)
+        # six vertices (two triangles) per facet, 24 facets around, one band per element
+        elements = len(offline[log_time][1][0]) - 1
+        assert elements == MESH_ELEMENTS
+        assert points.shape == expected.shape == (6 * 24 * elements, 3)
         assert np.array_equal(points, expected)
 
 
