@@ -80,7 +80,7 @@ def test_a_restarted_sim_node_is_picked_up_by_the_controller_and_the_recorder(
             # recorded clock fell back from 0.15 s although the harness had seen 1.0 s; not
             # reproduced since. Either the recorder's callbacks lagged, or its reliable reader
             # held samples behind a lost one until the writer's repair (a killed writer sends
-            # none): docs/RELIABILITY.md. If the recorder stalls for good, this wait fails and
+            # none): docs/dev/reliability.md. If the recorder stalls for good, this wait fails and
             # says so. At 100 Hz of /clock from t >= 0 (t = 0 at most twice), 105 messages reach
             # past 1.0 s.
             h.spin_until(

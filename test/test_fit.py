@@ -3,7 +3,7 @@
 
 `pulsejet fit`: recovers known parameters from a synthetic recording (a real MCAP written by the
 project's writer and read back) and from target figures; refuses bad fit files naming the key;
-the calibrated robot scene swims as docs/CALIBRATION.md reports. Real runner, no mocks.
+the calibrated robot scene swims as docs/validation/calibration.md reports. Real runner, no mocks.
 """
 
 from pathlib import Path
@@ -185,7 +185,7 @@ def test_calibrated_robot_swims_within_30_percent_of_the_measured_speeds():
     spec = fit.load_fit('shell_robot')
     spec.scene = str(ROOT / 'config' / 'shell_robot_calibrated.yaml')
     figs = fit.figures(spec, fit.simulate(spec, {}))  # the scene's own values, no override
-    for name, value in stored['figures'].items():  # what docs/CALIBRATION.md reports
+    for name, value in stored['figures'].items():  # what docs/validation/calibration.md reports
         assert figs[name] == pytest.approx(value, rel=1e-3), name
     assert abs(figs['mean_speed_m_s'] / 0.135 - 1) < 0.30
     assert abs(figs['burst_speed_m_s'] / 0.2 - 1) < 0.30

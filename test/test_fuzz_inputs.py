@@ -4,7 +4,7 @@ Property-based tests (hypothesis) of the inputs a user hands pulsejet.
 Scene files, command sequences into Simulation, sweep files. The generators and the `check_*`
 properties are in benchmarks/reliability/input_fuzz.py (its docstring states each property), which
 benchmarks/reliability/reliability_table.py also runs at a larger example count to tabulate the
-outcomes (docs/RELIABILITY.md). Example counts here are bounded to keep `make test` fast.
+outcomes (docs/dev/reliability.md). Example counts here are bounded to keep `make test` fast.
 """
 
 from __future__ import annotations

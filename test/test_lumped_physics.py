@@ -109,7 +109,7 @@ def test_paper_coupling_books_the_energy_its_equations_create():
 
 def ledger_closure_from_keys(ledger):
     """
-    Compute the closure as docs/ARCHITECTURE.md defines it from the keys.
+    Compute the closure as docs/dev/architecture.md defines it from the keys.
 
     out_other aggregates valve and mixing.
     """
@@ -198,7 +198,7 @@ def test_closure_error_shrinks_at_the_integrator_order(coupling, duration_s):
 
 # ---- paper 001, section 4.1: each figure the paper reports, as a check --------------------------
 # Figures and definitions: pulsejet_sim/studies/section41.py; table and discussion:
-# docs/PHYSICS_LUMPED.md; every reading of the lost text: benchmarks/results/paper001_section41.md.
+# docs/theory/lumped.md; every reading of the lost text: benchmarks/results/paper001_section41.md.
 # A claim the model reproduces is asserted with a stated tolerance; a claim it does not reproduce
 # is asserted as what the model does, with the measured number in the message.
 
@@ -244,7 +244,7 @@ def test_section_4_1_added_mass_share(section41):
             ' paper: up to ~0.75'
         )
     # NOT reproduced in either coupling: F_amv / T = kappa U / u_j with kappa <= 0.58 here, so 75 %
-    # would need a vehicle several times faster than its own jet (docs/PHYSICS_LUMPED.md).
+    # would need a vehicle several times faster than its own jet (docs/theory/lumped.md).
     paper, cons = section41['paper'], section41['consistent']
     assert (
         paper.share_impulse < 0.5
@@ -342,7 +342,7 @@ SHELL_NOZZLE = {'options': {'nozzle_section': 'shell'}}
 
 @pytest.fixture(scope='module')
 def section41_shell_nozzle():
-    """Run section 4.1 under reading G (docs/PHYSICS_LUMPED.md): the nozzle follows the shell."""
+    """Run section 4.1 under reading G (docs/theory/lumped.md): the nozzle follows the shell."""
     out = {}
     for coupling in ('paper', 'consistent'):
         overrides = {'options': {'nozzle_section': 'shell', 'coupling': coupling}}

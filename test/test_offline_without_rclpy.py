@@ -1,7 +1,7 @@
 """
 The offline tools work where rclpy and the ROS message packages cannot be imported.
 
-docs/ARCHITECTURE.md promises that `pulsejet run|summary|plot|animate|sweep|fit|optimize|resim|
+docs/dev/architecture.md promises that `pulsejet run|summary|plot|animate|sweep|fit|optimize|resim|
 repair|view` need no rclpy (a machine with only the PyPI wheels of numpy, mcap and rosbags, a Dask
 worker, CI without ROS). Each sub-command runs here in a subprocess whose interpreter refuses
 rclpy, rcl*, rmw*, rosidl* and every *_msgs / *_interfaces / *_srvs package: a sitecustomize on

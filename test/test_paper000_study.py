@@ -3,7 +3,7 @@ Paper 000's study: a rerun case matches its row; the stored tables give the verd
 
 Paper 000's study (benchmarks/validation/paper000_study.py, ~15 min, not run here): one full case
 is rerun and must match its stored row bit for bit; the stored tables give the verdicts that
-docs/PHYSICS_SHELL.md reports, in each coupling.
+docs/theory/shell.md reports, in each coupling.
 """
 
 import math
@@ -54,7 +54,7 @@ def test_verdicts_of_the_stored_study_as_docs_report_them():
     """
     None of paper 000's five findings holds in either coupling.
 
-    What the model does with the values chosen once (docs/PHYSICS_SHELL.md explains each miss):
+    What the model does with the values chosen once (docs/theory/shell.md explains each miss):
     none of paper 000's five findings holds in either coupling.
     """
     assert verdicts('paper') == [False] * 5
@@ -89,7 +89,7 @@ def test_the_study_wall_cannot_resonate_at_the_routines_frequencies():
     """
     Finding 4 (an ellipsoid routine resonates) fails because the study's wall cannot resonate.
 
-    Experiment F (docs/PHYSICS_SHELL.md): the 20 kPa ellipsoid let go from an inflated shape does
+    Experiment F (docs/theory/shell.md): the 20 kPa ellipsoid let go from an inflated shape does
     not swing through rest with the study's 500 Pa s wall (damped at or above critical); with a
     tenth of it, it swings at the membrane hoop mode sqrt(2 h E / R^2 / m) / 2 pi (m: the wall
     and its added water per area), over three times the fastest study routine (1.89 Hz).
@@ -121,7 +121,7 @@ def test_the_cones_routine_spread_is_a_lagging_walls_stroke_rate():
     """
     Finding 5 (the cone almost independent of the routine) fails: its wall lags its muscle little.
 
-    Experiment G (docs/PHYSICS_SHELL.md): one internal cone reruns to its stored row
+    Experiment G (docs/theory/shell.md): one internal cone reruns to its stored row
     (routines.csv) bit for bit; on the stored rows, every internal cone's stroke over the last
     period shrinks from the slowest routine to the fastest by the ratio of a first-order lag of
     3 eta / E (within 0.02), its peak speed spreads by more than 1.4 (the routine's rate 1.49
@@ -179,7 +179,7 @@ def test_the_authors_hoop_tension_muscle_reproduces_no_internal_finding():
     """
     Experiment H: the muscle as the authors' code drives it reproduces none of findings 3-5.
 
-    docs/PHYSICS_SHELL.md, "Experiment H": the study's desired-radius muscle replaced by the code's
+    docs/theory/shell.md, "Experiment H": the study's desired-radius muscle replaced by the code's
     active hoop tension, 15 N/m on every section (the uniform cable of 2 pi T per metre of
     meridian). One case reruns to its stored row; on the stored rows (36 runs, each refined):
     findings 3-5 fail in both couplings at both resolutions; the same tension empties the 20 kPa
@@ -229,7 +229,7 @@ def test_the_water_inside_lets_the_paper_couplings_ellipsoid_resonate():
     """
     Experiment I: with the inertia of the water inside, finding 4 holds in the paper coupling.
 
-    docs/PHYSICS_SHELL.md, "Experiment I": paper 001's one-dimensional internal flow carried over
+    docs/theory/shell.md, "Experiment I": paper 001's one-dimensional internal flow carried over
     to the shell (`fluid.internal_inertia: one_dimensional`). One case reruns to its stored row;
     on the stored rows (108 runs, each refined) finding 4 holds in the paper coupling and nowhere
     else, the other four fail in both couplings, and the paper coupling's internal ellipsoids are
@@ -274,7 +274,7 @@ def test_the_water_inside_on_the_current_shape_folds_or_stops_the_study():
     """
     Experiment J: the inertance on the current shape stops too many runs to decide a finding.
 
-    docs/PHYSICS_SHELL.md, "Experiment J": the one-dimensional suction pulls narrowing sections
+    docs/theory/shell.md, "Experiment J": the one-dimensional suction pulls narrowing sections
     shut. One finished case reruns to its stored row; on the stored rows (both resolutions) no
     finding holds in either coupling; about half the paper coupling's runs stop (folds and Newton
     failures at a closing lip), and every consistent run that stops stops on a fold.
@@ -301,7 +301,7 @@ def test_the_water_insides_momentum_takes_finding_4_below_its_rule():
     """
     Experiment K: I's water inside with its momentum relative to the body reproduces no finding.
 
-    docs/PHYSICS_SHELL.md, "Experiment K": `fluid.internal_flow_momentum: true` adds `rho S V'`.
+    docs/theory/shell.md, "Experiment K": `fluid.internal_flow_momentum: true` adds `rho S V'`.
     One case reruns to its stored row; on the stored rows (108 runs, each refined) no finding holds
     in either coupling. In the paper coupling every shell is I's (the same strokes, run by run),
     the speeds only gain, and the 80 kPa ellipsoid still swims fastest at its breathing mode's

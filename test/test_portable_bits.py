@@ -4,7 +4,7 @@ Every shipped scene steps to the same bits whichever SIMD kernels numpy picks on
 numpy runs some float64 functions (arctan2, exp, log, power, arcsin, ...) on CPUs with AVX-512
 through kernels whose last bits differ from the C library's. A model that used them while it
 builds or steps would rerun a stored study an ulp off on another CPU, as the paper 000 study did
-until the reference geometry took the C library's atan2 (docs/PHYSICS_SHELL.md, "Paper 000 against
+until the reference geometry took the C library's atan2 (docs/theory/shell.md, "Paper 000 against
 the model"). Here each shipped scene is built and stepped in two child processes, one with numpy's
 AVX-512 kernels turned off (NPY_DISABLE_CPU_FEATURES); state, observation and ledger must agree bit
 for bit. On a CPU without AVX-512 both take the same path, so the test is skipped and says why.

@@ -301,7 +301,7 @@ def test_paper_code_clamps_the_pole_and_frees_the_edge():
     """
     Check experiment E, `coupling: paper_code`.
 
-    The authors' code, docs/PHYSICS_SHELL.md "Experiment E": the body holds the polar cap up to
+    The authors' code, docs/theory/shell.md "Experiment E": the body holds the polar cap up to
     the rim of the code's pi/4 hole (sigmas_o = zeros(6,1) at X = 0), the open edge carries no
     wrench and moves in r, z and theta; thrust, refill force and
     drag ride on the wall and reach the vehicle through the rim; the ledger names what the scheme

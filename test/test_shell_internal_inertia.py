@@ -1,5 +1,5 @@
 """
-The water inside the mantle as a one-dimensional flow (experiment I, docs/PHYSICS_SHELL.md).
+The water inside the mantle as a one-dimensional flow (experiment I, docs/theory/shell.md).
 
 ``fluid.internal_inertia: one_dimensional`` gives the water inside the kinetic energy
 ``1/2 rho Lambda V'^2`` of paper 001's section 3.4 flow: its inertance against geometry, its

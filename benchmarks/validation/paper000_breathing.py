@@ -1,7 +1,7 @@
 """
 Paper 000 study, experiment F.1: the mantles' free breathing.
 
-docs/PHYSICS_SHELL.md, "Experiment F".
+docs/theory/shell.md, "Experiment F".
 
 Not the study: the study's internal scenes with the muscle off, started inflated by 3 mm
 (`initial.radial_perturbation_m`, r += d sin(pi X/L)), at the study's wall viscosity and with it
@@ -149,7 +149,7 @@ def main() -> int:
         f'Python {platform.python_version()}; '
         f'command `.venv/bin/python -m benchmarks.validation.paper000_breathing`, one process, '
         f'{wall:.0f} s wall.\n\n'
-        'Not the study (docs/PHYSICS_SHELL.md, "Experiment F", written before this ran): the '
+        'Not the study (docs/theory/shell.md, "Experiment F", written before this ran): the '
         "study's internal scenes (96 elements, 0.5 ms; the routine's label does not matter "
         f'with the muscle off) with no actuation, started inflated by {PERTURBATION_M * 1e3:g} '
         f'mm (r += d sin(pi X/L)), {DURATION_S:g} s, at the study' + "'" + 's wall viscosity '

@@ -28,31 +28,31 @@ D. fixed_nozzle: in the paper coupling, the jet leaves through a fixed nozzle of
    authors' later code (github.com/federicorenda/Unified-Multi-soft-body-Dynamics, octopus_driver.m
    `Rn = 12.5e-3; Area_out = pi*Rn.^2`, used unchanged in octopus_derivatives.m's thrust) keeps the
    exit area fixed whatever the shell does (findings 1, 2; external cases, paper coupling).
-E. authors_code: the authors' code as written (`coupling: paper_code`, docs/PHYSICS_SHELL.md
+E. authors_code: the authors' code as written (`coupling: paper_code`, docs/theory/shell.md
    "Experiment E"): pole clamped and edge free, fixed 12.5 mm nozzle, a refilling force, thrust +
    refill + body drag as a uniform axial load on the wall, added mass 1.1 x the shell's own mass in
    every translation, the shell's inertia in the vehicle's frame; all 54 cases of the study's
    `paper` coupling (36 external, 18 internal) (all findings).
 F. elastic_wall: the wall's Kelvin-Voigt viscosity a tenth of the study's (`eta_v` = 50 Pa s
    instead of the authors' code's 500 Pa s; 0 crumples at the mesh scale), nearly the limit most
-   favourable to a resonance (docs/PHYSICS_SHELL.md, "Experiment F";
+   favourable to a resonance (docs/theory/shell.md, "Experiment F";
    findings 3, 4, 5; internal cases, paper coupling). F.1, the mantles' free breathing, is
    benchmarks/validation/paper000_breathing.py.
 I. internal_inertia: the water inside the mantle carries the inertia of paper 001's
    one-dimensional internal flow (`fluid.internal_inertia: one_dimensional`: kinetic energy
-   1/2 rho Lambda V'^2, docs/PHYSICS_SHELL.md "Experiment I"); all 54 cases, both couplings
+   1/2 rho Lambda V'^2, docs/theory/shell.md "Experiment I"); all 54 cases, both couplings
    (all findings).
 J. internal_inertia_deforming: as I, with Lambda of the current shape instead of the reference
    (`one_dimensional_deforming`): the water resists a shape that narrows its way out while it flows
-   (docs/PHYSICS_SHELL.md "Experiment J"; all 54 cases, both couplings; all findings).
+   (docs/theory/shell.md "Experiment J"; all 54 cases, both couplings; all findings).
 K. internal_momentum: as I, with that flow's momentum relative to the body too
    (`fluid.internal_flow_momentum: true`: rho S V', S = int V_b/V dz; the vehicle feels
-   -rho S V'', in the consistent coupling the wall the pressure -rho S U'; docs/PHYSICS_SHELL.md
+   -rho S V'', in the consistent coupling the wall the pressure -rho S U'; docs/theory/shell.md
    "Experiment K"; all 54 cases, both couplings; all findings).
 H. hoop_tension: the muscle as the authors' code drives it, an active hoop tension of 15 N/m
    times the routine's triangle on every section of the mantle (`zetas2_a = [0;0;0;0;0;-Ten]`,
    octopus_derivatives.m), instead of the study's desired-radius muscle: a radial pull of
-   2 pi 15 N/m per metre of reference meridian, the `uniform` cable (docs/PHYSICS_SHELL.md,
+   2 pi 15 N/m per metre of reference meridian, the `uniform` cable (docs/theory/shell.md,
    "Experiment H"; findings 3, 4, 5; internal cases, both couplings).
 
 Every run of an experiment is also stored, row by row in the study's columns, in
@@ -262,7 +262,7 @@ EXPERIMENTS = {
         authors_code,
         ('paper',),
         True,
-        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment E: the authors\' '
+        'Reading (decided and written into docs/theory/shell.md, "Experiment E: the authors\' '
         'code", with the code\'s lines quoted, before any run): the six places where the study\'s '
         "`paper` coupling departs from the authors' public code of the same shell "
         '(github.com/federicorenda/Unified-Multi-soft-body-Dynamics, commit 2cabfe59, '
@@ -291,7 +291,7 @@ EXPERIMENTS = {
         elastic_wall,
         ('paper',),
         True,
-        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment F", before any '
+        'Reading (decided and written into docs/theory/shell.md, "Experiment F", before any '
         "run): the study's wall is a Kelvin-Voigt solid with `eta_v` = 500 Pa s (the authors' "
         'code; '
         'paper 000 gives no value); the estimated damping ratio of the breathing mode, '
@@ -309,7 +309,7 @@ EXPERIMENTS = {
         hoop_tension,
         COUPLINGS,
         True,
-        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment H", before any '
+        'Reading (decided and written into docs/theory/shell.md, "Experiment H", before any '
         'run): paper 000 section 5.2 drives the muscle through a desired-radius function (Fig. '
         "12, curves lost); the authors' public code of the same shell drives it with an active "
         'hoop tension, `ten = -15*triangularPulse(0,1/2,1,[0 1/2 1])` (octopus_driver.m), '
@@ -331,7 +331,7 @@ EXPERIMENTS = {
         internal_inertia,
         COUPLINGS,
         True,
-        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment I", before any '
+        'Reading (decided and written into docs/theory/shell.md, "Experiment I", before any '
         "study run): paper 000's wall loads are drag and an added mass \"representing the load "
         'locally exerted by pressure" (eq. (22)); the study\'s added mass is the outer '
         "water's, local. The water inside, which must leave through the mantle's opening, gets "
@@ -349,7 +349,7 @@ EXPERIMENTS = {
         internal_inertia_deforming,
         COUPLINGS,
         True,
-        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment J", before any '
+        'Reading (decided and written into docs/theory/shell.md, "Experiment J", before any '
         "study run): experiment I's internal flow with `Lambda = int (V_b/V)^2 / (pi r^2) dz` "
         'taken on the current shape instead of the reference one (paper 001 builds its internal '
         "flow on the ellipsoid's current sections, `A(x) = pi b^2 (1 - x^2)`, eqs. 4-6), "
@@ -365,7 +365,7 @@ EXPERIMENTS = {
         internal_momentum,
         COUPLINGS,
         True,
-        'Reading (decided and written into docs/PHYSICS_SHELL.md, "Experiment K", before any '
+        'Reading (decided and written into docs/theory/shell.md, "Experiment K", before any '
         "study run): experiment I's one-dimensional flow also carries the momentum "
         "`rho S V'` relative to the body along +z, `S = int V_b/V dz` over the reference cavity "
         '(ellipsoid 0.0732 m, cone 0.0395 m): the momentum balance of the body and the water '

@@ -1,7 +1,7 @@
 """
 Paper 000 study, experiment K: the exact momentum of the water inside against `rho S V'`.
 
-docs/PHYSICS_SHELL.md, "Experiment K" (corrections): for any incompressible flow in the cavity the
+docs/theory/shell.md, "Experiment K" (corrections): for any incompressible flow in the cavity the
 water's axial momentum relative to the body is exactly `rho dM1/dt`, `M1 = int z dV` the cavity's
 first moment about its opening plane (the water leaving crosses `z = 0`); K's `rho S V'` (`S` the
 reference cavity's centroid height, `M1 / V` at rest) equals it for a uniform dilation only. This

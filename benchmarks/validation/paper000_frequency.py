@@ -1,7 +1,7 @@
 """
 Paper 000 study, experiment F.3: the internal ellipsoid's response to the routine's frequency.
 
-docs/PHYSICS_SHELL.md, "Experiment F". Not the study: the study's internal ellipsoid at 20 kPa in
+docs/theory/shell.md, "Experiment F". Not the study: the study's internal ellipsoid at 20 kPa in
 the `paper` coupling, its routine's frequency swept (contraction 30 % and release 45 % of the
 period, half cosines, as the study's first version's routines), at the study's wall viscosity and
 a tenth of it; every run again at twice the elements and half the step. Writes
@@ -124,7 +124,7 @@ def main() -> int:
         f'Python {platform.python_version()}; '
         f'command `.venv/bin/python -m benchmarks.validation.paper000_frequency`, one process, '
         f'{wall:.0f} s wall.\n\n'
-        'Not the study (docs/PHYSICS_SHELL.md, "Experiment F", written before this ran): '
+        'Not the study (docs/theory/shell.md, "Experiment F", written before this ran): '
         f'`{CASE}` (96 elements, 0.5 ms) with the routine at each frequency, contraction '
         f'{CONTRACTION:.0%} and release {RELEASE:.0%} of the period (half cosines, as in the '
         f"study's first version), {DURATION_S:g} s, at the "

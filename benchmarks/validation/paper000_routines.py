@@ -12,7 +12,7 @@ run (as the study's columns) and over the last full period, the peak speed and i
 (`routines.csv`). Without it the stored rows are read. The table splits each case's routine
 spread into the last period's stroke ratio, the period ratio and a rest, beside a first-order lag
 of the wall's relaxation time 3 eta / E (`lag_strokes`); written to
-`benchmarks/results/paper000_study/routines.md`. docs/PHYSICS_SHELL.md, "Experiment G".
+`benchmarks/results/paper000_study/routines.md`. docs/theory/shell.md, "Experiment G".
 
     .venv/bin/python -m benchmarks.validation.paper000_routines [--rerun]
 """

@@ -276,7 +276,7 @@ def report(
             ' down); the value changed for that reason alone and every run was redone. The first'
             ' version reproduced none of the five findings in either coupling; its tables and'
             ' report are in `first_version/`, and experiments A-F (`experiments.md`) ran on it.'
-            ' Discussion: docs/PHYSICS_SHELL.md.'
+            ' Discussion: docs/theory/shell.md.'
         ),
         '',
     ]

@@ -4,7 +4,7 @@ Numerical experiment (not a test): paper 001, section 4.1, under each reading of
 Runs the escape scene (config/escape.yaml, values from the paper's text) in both couplings
 (`paper` = eqs. 1 and 3 as written, `consistent` = energy-consistent) and under the alternative
 readings of the text that the copy garbled, measures the figures the paper reports (definitions
-in pulsejet_sim/studies/section41.py and docs/PHYSICS_LUMPED.md), reruns every case at dt/2 to
+in pulsejet_sim/studies/section41.py and docs/theory/lumped.md), reruns every case at dt/2 to
 show the figures are converged, and writes benchmarks/results/paper001_section41.md.
 
     .venv/bin/python -m benchmarks.validation.paper001_section41
@@ -257,7 +257,7 @@ def main() -> None:
             ' or until the run stops on a bound, dt = 1e-4 s RK4, rerun at dt/2 (last column:'
             ' largest relative change of 90 % out, shares, k_x/k, peak speed, settled mass and'
             ' collapse time). Definitions: `pulsejet_sim/studies/section41.py`,'
-            ' `docs/PHYSICS_LUMPED.md`. "created" = sum of the `created_*` ledger keys at the end'
+            ' `docs/theory/lumped.md`. "created" = sum of the `created_*` ledger keys at the end'
             ' (energy that the applied equations make beyond the energy-consistent ones);'
             ' "closure" = stored - in + out - created.'
         ),

@@ -101,7 +101,7 @@ def check_command_value(name: str, value: float, low: float, high: float) -> flo
 # faulted, and a valve closing from 0.5 + 1e-5 faulted in 20 of 21 pump_cycle runs because its
 # stroke left it at 1e-5 for one step (benchmarks/validation/valve_seat_probe.py,
 # benchmarks/results/valve_seat.md). At 0.15 % no held opening faults at the shipped step, 1e-4 s
-# (a larger step faults at larger openings: docs/PHYSICS_LUMPED.md, Numerics); it is below the
+# (a larger step faults at larger openings: docs/theory/lumped.md, Numerics); it is below the
 # shipped scenes' stroke per step (2e-3, which rounding leaves at 0.0019999999999991 at the end of
 # a stroke from 1), so their fixed-step motion is unchanged bit for bit (a seat at 0.2 % sealed
 # them one step early).

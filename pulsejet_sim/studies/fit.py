@@ -7,7 +7,7 @@ target figures (`targets:`) or a recorded MCAP (`recording:`); scipy.optimize.le
 ROS-free `runner.Drive` (the same model, Simulation.step and routine as the nodes; no rclpy here).
 The report gives the fitted values beside the initial ones and the bounds, the residual of every
 figure or signal, the cost, the number of runs, and a sensitivity / identifiability table from a
-central-difference Jacobian at the solution. See docs/CALIBRATION.md.
+central-difference Jacobian at the solution. See docs/validation/calibration.md.
 
 Fit file::
 

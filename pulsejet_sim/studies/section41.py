@@ -1,7 +1,7 @@
 """
 The figures paper 001 reports for its section 4.1 escape manoeuvre, measured on a lumped run.
 
-Definitions (fixed before any result; docs/PHYSICS_LUMPED.md, "Section 4.1 against the paper"):
+Definitions (fixed before any result; docs/validation/papers.md, "Section 4.1 against the paper"):
 
 - window: t = 0 to the end of the first deflation, the first time b' returns to >= 0 after it went
   negative (the fluid mass's first minimum), or the end of the run if it never does;

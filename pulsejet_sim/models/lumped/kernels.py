@@ -4,7 +4,7 @@ numba kernels of the lumped pulsed-jet model (paper 001, section 3).
 Vehicle axial motion and the minor semi-axis ``b`` of an ellipsoidal shell, with the pump and the
 stern valve as inputs.
 
-Equations (see ``docs/PHYSICS_LUMPED.md`` for the derivation, the citations and the energy ledger).
+Equations (see ``docs/theory/lumped.md`` for the derivation, the citations and the energy ledger).
 Coupling ``consistent`` (the default, energy-consistent)::
 
     vehicle:  (M + m_f + m_x) U' = T - D - m_x' U - rho Q_in U
@@ -314,7 +314,7 @@ def nozzle(flags, b, p):
 
     Rigid (the default): A_n = pi r_n^2. With O_NOZZLE_FOLLOWS_SHELL, A_n = pi r_n^2 (b/b0)^2, so
     Lambda = rho L_n / A_n falls as 1/b^2 and m_l = Lambda V_b^2 is a constant (reading G,
-    docs/PHYSICS_LUMPED.md). Lambda and its derivative are 0 when the nozzle_inertia term is off.
+    docs/theory/lumped.md). Lambda and its derivative are 0 when the nozzle_inertia term is off.
     """
     if flags & O_NOZZLE_FOLLOWS_SHELL:
         a_n = p[P_NOZZLE_SECTION] * b * b

@@ -5,7 +5,7 @@ Immutable parameters compiled from a scene, plus the Model-protocol methods that
 kernels in ``lumped.kernels``.
 
 The derivation, the choices where the paper is ambiguous and the energy ledger are in
-``docs/PHYSICS_LUMPED.md``.
+``docs/theory/lumped.md``.
 """
 
 from __future__ import annotations
@@ -111,14 +111,14 @@ class DeprecatedAlias:
 
 OPTIONS_SPEC = {
     # how the shell and the vehicle are coupled: 'paper' = eqs. (1) and (3) of paper 001 as
-    # written, 'consistent' = the energy-consistent coupling (docs/PHYSICS_LUMPED.md)
+    # written, 'consistent' = the energy-consistent coupling (docs/theory/lumped.md)
     'coupling': Choice('consistent', COUPLINGS),
     'energy_model': DeprecatedAlias('coupling', COUPLINGS),  # deprecated name of 'coupling'
     'added_mass_form': Choice('exact', ('exact', 'simplified')),
     'simplified_added_mass_coefficient': Number(0.45, 0.0, 10.0, unit=''),
     # the nozzle's section: 'rigid' = pi r_n^2; 'shell' = pi r_n^2 (b/b0)^2, the section of the
     # ellipsoid at the nozzle inlet plane x_e that paper 001's eq. 8 writes A(x_e) (reading G,
-    # docs/PHYSICS_LUMPED.md); r_n is then the nozzle's radius at rest
+    # docs/theory/lumped.md); r_n is then the nozzle's radius at rest
     'nozzle_section': Choice('rigid', ('rigid', 'shell')),
 }
 SECTION_SPECS = {

@@ -78,7 +78,7 @@ class Profile:
 
         ``S = int (V_b(z)/V) dz`` from the open end to the pole: the flux ``V' V_b(z)/V`` through
         each section, integrated over the axis, is the water's volume times its mean axial
-        velocity relative to the body (docs/PHYSICS_SHELL.md, "Experiment K").
+        velocity relative to the body (docs/theory/shell.md).
         """
         flux, dz = self._internal_flux('internal_flow_momentum: true')
         return float(np.sum(0.5 * (flux[:-1] + flux[1:]) * dz))

@@ -62,8 +62,8 @@ F_ROUTINE = 64
 F_PAPER = 128
 # the outlet is the mantle's own free edge: A_out(t) = pi r_edge(t)^2 (paper 000 section 5)
 F_EDGE = 256
-# the authors' code as written (experiment E, coupling paper_code; docs/PHYSICS_SHELL.md
-# "Experiment E"): pole clamped to the body, edge free, fixed nozzle, no cavity pressure and no
+# the authors' code as written (coupling paper_code, for auditing it; docs/validation/papers.md):
+# pole clamped to the body, edge free, fixed nozzle, no cavity pressure and no
 # tangential drag on the wall; thrust, refilling force and body drag loaded on the wall as a
 # uniform axial load per reference area; the vehicle (consistent frame, monolithic) feels them
 # through the clamped pole's axial reaction
@@ -96,7 +96,7 @@ P_LAMBDA = 32
 # 1: Lambda follows the current shape (fluid.internal_inertia: one_dimensional_deforming)
 P_LAMBDA_DEFORMING = 33
 # length S, m, of that flow's momentum relative to the body, rho S V' along +z
-# (fluid.internal_flow_momentum: true, experiment K; 0: left out)
+# (fluid.internal_flow_momentum: true; 0: left out)
 P_SMOM = 34
 # the starting jet's formation number F (jet.starting_jet, models/starting_jet.py); 0: term off
 P_FORMATION_NUMBER = 35
@@ -133,7 +133,8 @@ S_CREATED = 17  # paper coupling: the jet's kinetic energy that no wall force pa
 S_CREATED_WALL = (
     18  # paper_code: work of the wall-borne thrust, refill force and drag beyond the books, J
 )
-S_CREATED_MOM = 19  # paper coupling, experiment K: work of the unreacted -rho S V'' on the body, J
+# paper coupling, the water's momentum: work of the unreacted -rho S V'' on the body, J
+S_CREATED_MOM = 19
 # jet.starting_jet (models/starting_jet.py): the current pulse's formation time int u_j/D dt, and
 # the exit over-pressure's work that left with the jet (part of S_JET), J
 S_FORMATION_TIME, S_OVERPRESSURE_WORK = 20, 21
@@ -937,8 +938,9 @@ def _rank_three_correction(dv, gf, zz, ze, rz, c, s, n):
     """
     Turn dv = J^-1 R into (J + c g g^T + s (g e^T + e g^T))^-1 R (Woodbury, 2 x 2).
 
-    ``zz = J^-1 g``, ``ze = J^-1 e`` with ``e`` the vehicle's unit row ``rz``: I's rank one ``c``
-    and experiment K's symmetric cross term ``s = rho S / alpha`` between the wall and the vehicle.
+    ``zz = J^-1 g``, ``ze = J^-1 e`` with ``e`` the vehicle's unit row ``rz``: the inertance's
+    rank one ``c`` and the internal momentum's symmetric cross term ``s = rho S / alpha`` between
+    the wall and the vehicle.
     """
     a11 = 0.0
     a12 = 0.0
@@ -970,7 +972,7 @@ def _paper_vehicle_midpoint(flags, st, U, alpha, dt, P, impulse):
 
     U* of m (U* - U)/alpha = dt (T - D(U*) - ram(U*)) - impulse, with the thrust T of the shell's
     midpoint state (the shell does not feel U); ``impulse`` is the step's change of the water
-    inside's momentum relative to the body (experiment K; 0 without it); scalar Newton.
+    inside's momentum relative to the body (0 without it); scalar Newton.
     """
     Us = U
     for _ in range(20):
@@ -1031,8 +1033,8 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
     # workspace, across calls
     have_lu = ws[WS_HAVE_LU] > 0.5
     have_prev = ws[WS_HAVE_PREV] > 0.5
-    # the water inside: 1/2 rho Lambda Q^2 with Q = grad V . v_rel (docs/PHYSICS_SHELL.md,
-    # "Experiment I"); Lagrange's equation gives the impulse rho Lambda (Q_end - Q_start) grad V
+    # the water inside: 1/2 rho Lambda Q^2 with Q = grad V . v_rel (docs/theory/shell.md, the
+    # water inside); Lagrange's equation gives the impulse rho Lambda (Q_end - Q_start) grad V
     rho_lam = P[P_RHO] * P[P_LAMBDA]
     deforming = rho_lam > 0.0 and P[P_LAMBDA_DEFORMING] > 0.5
     g_end = np.zeros(n)
@@ -1041,7 +1043,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
     lam_start = P[P_LAMBDA]
     lam_end = P[P_LAMBDA]
     rho_lam_now = rho_lam  # the Newton matrix's inertia of the water inside
-    # experiment K: that water's momentum relative to the body, rho S Q along +z
+    # that water's momentum relative to the body, rho S Q along +z
     rho_s = P[P_RHO] * P[P_SMOM]
     e_u = np.zeros(n)  # the vehicle's unit row (J^-1 of it: ze, consistent coupling)
     for step in range(n_steps):
@@ -1182,8 +1184,8 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
                         R[k] += imp * gf[k]  # the vehicle's row too: it carries the frame
                     if rho_s > 0.0 and body:
                         # Lagrange's equation of the cross term rho S U Q: the wall feels the
-                        # uniform pressure -rho S U', the vehicle -rho S Q' (docs/PHYSICS_SHELL.md,
-                        # "Experiment K")
+                        # uniform pressure -rho S U', the vehicle -rho S Q'
+                        # (docs/theory/shell.md)
                         du_ = (Us - U) / alpha
                         for k in range(n):
                             R[k] += rho_s * du_ * gf[k]
@@ -1191,7 +1193,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
                     if deforming:
                         # the wall feels +1/2 rho Q^2 grad Lambda (the residual's -dt ...): the
                         # flowing water pulls a narrow section narrower, the -1/2 rho u^2 of
-                        # Bernoulli (docs/PHYSICS_SHELL.md, "Experiment J")
+                        # Bernoulli (docs/validation/papers.md)
                         inertance(q1, n1, g_lam)
                         q_mid = st[T_VDOT]  # forces() took grad V . v_rel at (q*, v*) above
                         for k in range(n):
@@ -1337,7 +1339,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
             if flags & F_PAPER:
                 imp_mom = 0.0
                 if rho_s > 0.0:
-                    # experiment K: the water inside's momentum changes by rho S (Q_end - Q_start)
+                    # the water inside's momentum changes by rho S (Q_end - Q_start)
                     # over the step, Q relative to the body (the frame the paper's shell lives in)
                     q_end_flow = end_of_step_flow(
                         Nd, qn, vn, vs, 0.0, 0.0, dt, alpha, q_end, g_end, v1
@@ -1346,12 +1348,12 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
                 if flags & F_BODY:
                     Us = _paper_vehicle_midpoint(flags, st, U, alpha, dt, P, imp_mom)
                     # no wall force reacts to it (the shell has no frame forces here): its work
-                    # on the vehicle is created or destroyed (docs/PHYSICS_SHELL.md, experiment K)
+                    # on the vehicle is created or destroyed (docs/theory/shell.md)
                     state[tail + S_CREATED_MOM] -= imp_mom * Us
                 acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
                 # what the consistent wall pressure would have charged the shell for the outflow:
                 # the jet's kinetic energy flux in the body frame, 1/2 rho A u^3
-                # (docs/PHYSICS_SHELL.md, "The ledger of the paper coupling").  On inflow nothing
+                # (docs/theory/shell.md, "The ledger of the paper coupling").  On inflow nothing
                 # is created: no suction acts on the wall and the inflow jet's kinetic energy is
                 # not booked out either
                 if (flags & F_JET) and st[T_VDOT] < 0.0:
@@ -1379,7 +1381,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
                 if flags & F_CODE:
                     # as in the paper coupling no cavity pressure pays for the jet; and the thrust,
                     # the refill force and the drag work at the wall's speed, not the vehicle's
-                    # (docs/PHYSICS_SHELL.md, "Experiment E")
+                    # (docs/validation/papers.md)
                     if (flags & F_JET) and st[T_VDOT] < 0.0:
                         uj_ = -st[T_VDOT] / st[T_AOUT]
                         state[tail + S_CREATED] += (

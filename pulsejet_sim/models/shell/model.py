@@ -41,7 +41,7 @@ water ``rho V`` moves with the vehicle.  Vehicle: ``(M + m_x + rho V) U' = T - 1
 pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell:
 ``-1/2 rho C_t A_i |v_t| v_t`` along the current tangent.
 
-*Couplings* (scene key ``coupling``; docs/PHYSICS_SHELL.md has the citations).  ``consistent``
+*Couplings* (scene key ``coupling``; docs/theory/shell.md has the citations).  ``consistent``
 (default): as described above.  ``paper``: paper 000's scheme (its coupling of Fig. 5): the shell
 is solved in the body frame (its drag and added mass see only its own motion relative to the body),
 the water loads the wall only through drag and added mass (no cavity pressure), and the vehicle
@@ -55,8 +55,8 @@ at that edge, ``A_out = pi r_edge(t)^2``) or ``free_edge_fixed_nozzle`` (the edg
 ``edge``, but the jet leaves through a fixed nozzle of ``outlet_radius_m``, ``A_out = pi r_n^2``:
 the authors' later code, ``Area_out = pi*Rn.^2`` with ``Rn = 12.5e-3``, whose exit area does not
 follow the shell).
-``paper_code`` (experiment E, the authors' public code as written; citations in
-docs/PHYSICS_SHELL.md, "Experiment E"): the pole is clamped to the body and the edge is free in r,
+``paper_code`` (the authors' public code as written, for auditing it; citations in
+docs/validation/papers.md): the pole is clamped to the body and the edge is free in r,
 z and theta; fixed nozzle (``free_edge_fixed_nozzle``, default radius 12.5 mm); no cavity pressure
 and no tangential drag on the wall; thrust, a refilling force ``-C_f rho V'^2/A_in`` and the body
 drag act on the wall as a uniform axial load per reference area and reach the vehicle through the
@@ -73,16 +73,16 @@ and ram loss) + the thrust mismatch ``(1 - C_f) rho A u_j^2 U``.  With C_f = 1 a
 transfers are exact in the continuous model, so ``closure_error`` measures time discretisation
 only.
 
-*Water inside* (``fluid.internal_inertia: one_dimensional``, experiment I of
-docs/PHYSICS_SHELL.md).  Kinetic energy ``1/2 rho Lambda V'^2`` of paper 001's one-dimensional
+*Water inside* (``fluid.internal_inertia: one_dimensional``, docs/theory/shell.md, the water
+inside).  Kinetic energy ``1/2 rho Lambda V'^2`` of paper 001's one-dimensional
 internal flow, ``Lambda`` the reference cavity's inertance (``Profile.internal_inertance_per_m``);
 by Lagrange's equation a uniform pressure ``-rho Lambda V''`` on the inner wall, stored in the
-ledger as ``stored_kinetic_internal_flow``.  ``one_dimensional_deforming`` (experiment J) takes
-``Lambda`` of the current shape (``shell_kernels.inertance``): the pressure becomes
+ledger as ``stored_kinetic_internal_flow``.  ``one_dimensional_deforming`` takes
+``Lambda`` of the current shape (``shell.kernels.inertance``): the pressure becomes
 ``-rho (Lambda V')'`` and the wall also feels ``+1/2 rho V'^2 grad Lambda``, Bernoulli's
 ``-1/2 rho u^2``, which pulls a narrow section narrower while the water flows; a step that folds
 the meridian back along the axis stops the run (the 1-D flow is undefined there).
-``fluid.internal_flow_momentum: true`` (experiment K, with ``one_dimensional`` only) adds the
+``fluid.internal_flow_momentum: true`` (with ``one_dimensional`` only) adds the
 same flow's momentum relative to the body, ``rho S V'`` along +z (``S = int V_b/V dz``,
 ``Profile.internal_momentum_length_m``): the vehicle feels ``-rho S V''``; in the consistent
 coupling the wall also feels the uniform pressure ``-rho S U'`` (Lagrange's equation of the cross
@@ -216,7 +216,7 @@ COUPLINGS = ('consistent', 'paper', 'paper_code')
 OUTLETS = ('ring', 'edge', 'free_edge_fixed_nozzle')
 DESIRED_RADIUS = ('proportional', 'constant_depth', 'constant_depth_to_edge')
 #: the water inside: no inertia of its own (paper 000's loads), or paper 001's one-dimensional
-#: internal flow carried over to the shell (experiment I)
+#: internal flow carried over to the shell
 INTERNAL_INERTIA = ('none', 'one_dimensional', 'one_dimensional_deforming')
 #: the reference profile is resampled this finely for the internal inertance, so that it does
 #: not change with the mesh
@@ -609,7 +609,8 @@ class ShellModel:
                 'true or false'
             )
         if flow_momentum and internal_inertia != 'one_dimensional':
-            # experiment K completes I's flow, whose S (like its Lambda) is the reference cavity's
+            # the momentum is the reference cavity's 1-D flow's (its S, like its Lambda, is that
+            # cavity's): it needs that flow
             raise ModelError(
                 f'fluid.internal_flow_momentum: true needs internal_inertia: one_dimensional '
                 f'(the scene has {internal_inertia!r}); allowed: internal_flow_momentum: false, '
@@ -667,7 +668,7 @@ class ShellModel:
         inertance = 0.0
         momentum_length = 0.0
         if internal_inertia != 'none':
-            # experiment I (docs/PHYSICS_SHELL.md): the 1-D flow of the water inside ends at the
+            # the 1-D flow of the water inside (docs/theory/shell.md) ends at the
             # cavity's own open section, so the jet must leave through the free edge; a smaller
             # nozzle would add a contraction whose inertance this reading does not give
             if outlet != 'edge' or code or integrator == 'verlet' or not terms['jet']:
@@ -1258,7 +1259,7 @@ class ShellModel:
         k_flow = 0.5 * float(self.P[sk.P_RHO] * self.inertance(state)) * float(st[sk.T_VDOT]) ** 2
         k_cross = 0.0
         if not self.flags & sk.F_PAPER:
-            # the earth-frame cross term rho S U V' of that flow (experiment K; 0 without it);
+            # the earth-frame cross term rho S U V' of that flow (its momentum; 0 without it);
             # the paper coupling's shell has no frame, its vehicle force is booked as created
             k_cross = float(self.P[sk.P_RHO] * self.P[sk.P_SMOM]) * U * float(st[sk.T_VDOT])
         total = el + k_veh + k_out + float(kint) + k_flow + k_cross
@@ -1296,14 +1297,15 @@ class ShellModel:
         out = led['out_jet_kinetic'] + led['out_drag'] + led['out_viscous'] + led['out_other']
         created = 0.0
         if self.flags & sk.F_PAPER:
-            # not an input: the energy the paper's equations create, named (docs/PHYSICS_SHELL.md)
+            # not an input: the energy the paper's equations create, named (docs/theory/shell.md)
             created = led['created_unpaid_jet_kinetic'] = float(T[sk.S_CREATED])
             if self.P[sk.P_SMOM] > 0.0:
                 led['created_unpaid_internal_momentum'] = float(T[sk.S_CREATED_MOM])
                 created += led['created_unpaid_internal_momentum']
         elif self.flags & sk.F_CODE:
-            # experiment E (docs/PHYSICS_SHELL.md): the unpaid jet, and the work of the wall-borne
-            # thrust, refill force and drag beyond what the books charge at the vehicle's speed
+            # the authors' code (docs/validation/papers.md): the unpaid jet, and the work of the
+            # wall-borne thrust, refill force and drag beyond what the books charge at the
+            # vehicle's speed
             led['created_unpaid_jet_kinetic'] = float(T[sk.S_CREATED])
             led['created_wall_loads'] = float(T[sk.S_CREATED_WALL])
             created = led['created_unpaid_jet_kinetic'] + led['created_wall_loads']
@@ -1359,8 +1361,9 @@ class ShellModel:
         Undamped natural frequency ``|lambda| / 2 pi`` and damping ratio ``-Re lambda / |lambda|``
         of each complex pair of ``M x'' + C x' + K x = 0``, lowest first; the body held still.
         With ``fluid.internal_inertia`` the water inside adds ``rho Lambda g g^T`` to M
-        (g = grad V): its kinetic energy ``1/2 rho Lambda V'^2``.  Experiment K's momentum of that
-        water couples the wall to the body's speed only, so with the body held it adds nothing.
+        (g = grad V): its kinetic energy ``1/2 rho Lambda V'^2``.  That water's momentum
+        (internal_flow_momentum) couples the wall to the body's speed only, so with the body held
+        it adds nothing.
         """
         free, Mf, Kf, Cf = self._linearised(state)
         if self.P[sk.P_LAMBDA] > 0.0:
