@@ -39,3 +39,25 @@ def test_the_patterns_catch_what_they_are_for():
     assert EXPERIMENT_LETTER.search('see "Experiment E"')
     assert not EXPERIMENT_LETTER.search('the experiment of Weymouth et al.')
     assert OLD_DOCS.search('see docs/PHYSICS_SHELL.md')
+
+
+def test_every_import_of_pulsejet_names_a_module_that_exists():
+    """Scripts, tests and lazy imports too: a moved module leaves no import behind."""
+    import ast
+    import importlib.util
+
+    missing = []
+    for folder in ('pulsejet_sim', 'pulsejet_ctrl', 'benchmarks', 'test', 'examples', 'launch'):
+        for path in sorted((ROOT / folder).rglob('*.py')):
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    names = [node.module]
+                elif isinstance(node, ast.Import):
+                    names = [alias.name for alias in node.names]
+                else:
+                    continue
+                for name in names:
+                    if name.split('.')[0] in ('pulsejet_sim', 'pulsejet_ctrl', 'benchmarks'):
+                        if importlib.util.find_spec(name) is None:
+                            missing.append(f'{path.relative_to(ROOT)}:{node.lineno}: {name}')
+    assert not missing, 'imports of modules that do not exist:\n' + '\n'.join(missing)

@@ -489,7 +489,7 @@ def pieces_of(default: Case, kernel_s_per_step: float, duration_s: float) -> dic
     per step (a Newton step that converges at once with a kept factorisation) and nothing else.
     """
     from numba import njit
-    from pulsejet_sim.models import shell_kernels as sk
+    from pulsejet_sim.models.shell import kernels as sk
 
     @njit
     def loop_forces(k, flags, q, v, E, Nd, P, F, gV, vr, st):

@@ -119,7 +119,7 @@ def run(
     )
     markers = []
     if subscribe_marker:
-        from pulsejet_sim.interface import TOPIC_MANTLE_MARKER
+        from pulsejet_sim.core.topics import TOPIC_MANTLE_MARKER
         from visualization_msgs.msg import Marker
 
         node.create_subscription(
