@@ -22,7 +22,6 @@ batch.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from gymnasium.utils import seeding
@@ -41,6 +40,7 @@ from pulsejet_sim.envs.lumped_env import (
 )
 from pulsejet_sim.models.lumped import batch as B
 from pulsejet_sim.models.lumped import kernels as K
+from pulsejet_sim.models.lumped import model as lumped
 from pulsejet_sim.scene import load_scene
 
 
@@ -111,11 +111,8 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         self.Y[rows] = y0
         if self.initial_b_jitter > 0.0 and rows.size:
             u = self._rng.uniform(-self.initial_b_jitter, self.initial_b_jitter, size=rows.size)
-            self.Y[rows, K.Y_B] *= 1.0 + u
-            if y0[K.Y_VALVE] <= 0.0:
-                self.Y[rows, K.Y_W] = self.Y[rows, K.Y_QP] / (
-                    8.0 / 3.0 * math.pi * self.P[rows, K.P_A] * self.Y[rows, K.Y_B]
-                )
+            for row, factor in zip(rows, 1.0 + u):
+                lumped.scale_minor_semi_axis(self.Y[row], self.P[row], factor)
         self.Y0[rows] = self.Y[rows]
         self.periods[rows] = 0
         self.status[rows] = K.OK
@@ -139,8 +136,8 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         restart = np.flatnonzero(self._ended)
         if restart.size:
             self._reset_rows(restart)
-        x0 = self.Y[:, K.Y_X].copy()
-        w0 = self.Y[:, K.Y_W_PUMP].copy()
+        x0 = lumped.position_m(self.Y).copy()
+        w0 = lumped.pump_work_j(self.Y).copy()
         q = np.ascontiguousarray(act[:, 0])
         v = np.ascontiguousarray(act[:, 1])
         if restart.size:
@@ -165,10 +162,10 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         reward = R.reward(
             self.reward_name,
             x0=x0,
-            x1=self.Y[:, K.Y_X],
-            x_start=self.Y0[:, K.Y_X],
+            x1=lumped.position_m(self.Y),
+            x_start=lumped.position_m(self.Y0),
             work0=w0,
-            work1=self.Y[:, K.Y_W_PUMP],
+            work1=lumped.pump_work_j(self.Y),
             period_s=self.control_period_s,
             mass_kg=self.mass_kg,
             target_speed_m_s=self.target_speed_m_s,
@@ -182,7 +179,7 @@ class LumpedPumpValveVectorEnv(VectorEnv):
         self._ended = terminated | truncated
         info = {
             'fault': self.status.copy(),
-            'position_m': self.Y[:, K.Y_X].copy(),
-            'actuation_work_j': self.Y[:, K.Y_W_PUMP].copy(),
+            'position_m': lumped.position_m(self.Y).copy(),
+            'actuation_work_j': lumped.pump_work_j(self.Y).copy(),
         }
         return self._obs(), reward.astype(np.float64), terminated, truncated, info
