@@ -36,6 +36,7 @@ from pulsejet_sim.core.topics import (
     LEDGER_STATUS_NAME,
     LEDGER_WARN_RELATIVE,
     ODOM_FRAME_ID,
+    STATE_TOPICS,
     TOPIC_APPLIED_COMMAND,
     TOPIC_CLOCK,
     TOPIC_ENERGY_LEDGER,
@@ -321,13 +322,7 @@ def ledger_status(ledger: Mapping[str, float]) -> tuple[int, str]:
 
 #: the topics TopicEncoder writes (the offline runner's recording)
 RECORDED_TOPICS = (
-    TOPIC_MANTLE_RADIUS,
-    TOPIC_VOLUME,
-    TOPIC_VELOCITY,
-    TOPIC_THRUST,
-    TOPIC_FLUID_MASS,
-    TOPIC_ODOMETRY,
-    TOPIC_CLOCK,
+    *STATE_TOPICS,
     *COMMAND_TOPICS,
     TOPIC_APPLIED_COMMAND,
     TOPIC_MANTLE_PROFILE,
