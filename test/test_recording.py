@@ -139,3 +139,150 @@ def test_a_recorded_run_opens_in_rosbags_with_every_topic_and_matches_the_physic
     assert info.counts == {t: len(decoded[t]) for t in expected}
     own = [m.twist.linear.x for topic, _, _, m in read_bag(out) if topic == '/pulsejet/velocity']
     assert own == velocity
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize('name, duration_s', [('shell_robot', 4.0), ('pump_cycle', 3.0)])
+def test_run_scene_writes_the_file_one_write_records_per_publication_writes(
+    tmp_path, fixed_close_time, name, duration_s
+):
+    """The columnar recording (several chunks, batches across chunk ends) changes no byte."""
+    (tmp_path / 'a').mkdir()
+    (tmp_path / 'b').mkdir()
+    from benchmarks.performance.bench_recording import write_per_publication
+
+    write_per_publication(tmp_path / 'a' / 'run.mcap', name, duration_s)
+    run_scene(load_scene(name), duration_s, tmp_path / 'b' / 'run.mcap')
+    reference = (tmp_path / 'a' / 'run.mcap').read_bytes()
+    from mcap.reader import make_reader
+
+    with open(tmp_path / 'a' / 'run.mcap', 'rb') as fh:
+        assert make_reader(fh).get_summary().statistics.chunk_count > 1
+    assert (tmp_path / 'b' / 'run.mcap').read_bytes() == reference
+
+
+def test_column_encoder_rows_are_the_per_message_bytes():
+    rng = np.random.default_rng(7)
+    n = 9
+    times = np.sort(rng.uniform(0.0, 3e4, n))
+    times[0] = 0.0
+    ns = cdr.stamps_ns(times)
+    assert ns.tolist() == [cdr.stamp_ns(t) for t in times]
+    values = {f: rng.normal(size=n) * 10.0 ** rng.integers(-9, 3) for f in (
+        'mantle_radius_m', 'volume_m3', 'velocity_m_s', 'thrust_n', 'fluid_mass_kg', 'position_m')}
+    commands = np.abs(rng.normal(size=(n, 3)))
+    r_m, z_m = rng.normal(size=(n, 13)), rng.normal(size=(n, 13))
+    columns, per = cdr.ColumnEncoder(), cdr.TopicEncoder()
+    state = dict(columns.state(ns, values))
+    applied = columns.applied_commands(ns, commands)
+    profiles = columns.profiles(ns, r_m, z_m)
+    command_rows = dict(columns.commands(commands))
+    for i in range(n):
+        from pulsejet_sim.core.model_io import Command, Observation
+
+        obs = Observation(**{**dict.fromkeys(Observation.__dataclass_fields__, 0.0),
+                             **{k: float(v[i]) for k, v in values.items()},
+                             'time_s': float(times[i])})
+        for topic, data in per.observation(obs, int(ns[i])):
+            assert state[topic][i].tobytes() == data, topic
+        cmd = Command(*map(float, commands[i]))
+        for topic, data in per.commands(cmd):
+            assert command_rows[topic][i].tobytes() == data, topic
+        assert applied[i].tobytes() == per.applied_command(cmd, int(ns[i]))
+        assert profiles[i].tobytes() == per.profile(r_m[i], z_m[i], int(ns[i]))
+    with pytest.raises(ValueError, match='time_s=-1.0'):
+        cdr.stamps_ns([0.0, -1.0])
+    with pytest.raises(ValueError, match='allowed: two'):
+        columns.profiles(ns[:2], r_m[:2], z_m[:3])
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'none'])
+def test_a_batch_writes_the_file_per_message_writes_write(
+    tmp_path, fixed_close_time, monkeypatch, compression
+):
+    """write_batch: chunks ending inside a batch, topics first seen mid-batch; byte for byte."""
+    from pulsejet_sim.bag.batch import RecordBatch
+
+    batches = runner_batches('shell_robot', 0.3)
+    per_message = tmp_path / 'per_message' / 'run.mcap'
+    write_file(per_message, batches, batched=False, compression=compression)
+    # every message its own key, in write order; grouped by topic into blocks
+    blocks: dict[str, list] = {}
+    key = 0
+    for ns, records in batches:
+        for topic, data in records:
+            blocks.setdefault(topic, []).append((key, ns, data))
+            key += 1
+    for fast in (True, False):
+        if not fast:
+            monkeypatch.setattr(bag_writer._FastChunk, 'attach', classmethod(lambda c, w, s: None))
+        out = tmp_path / ('fast' if fast else 'public') / 'run.mcap'
+        with bag_writer.BagWriter(
+            out, compression=compression, chunk_size_bytes=3000, flush_period_s=1e6
+        ) as bag:
+            bag.add_metadata('pulsejet', {'scene': 'test'})
+            for part in (slice(0, 40), slice(40, None)):  # two batches
+                batch = RecordBatch()
+                for topic, items in blocks.items():
+                    items = [x for x in items if x[0] in range(key)[part]]
+                    sizes = {len(x[2]) for x in items}
+                    rows = (np.array([np.frombuffer(x[2], np.uint8) for x in items])
+                            if len(sizes) == 1 else [x[2] for x in items])
+                    batch.add(topic, [x[0] for x in items], [x[1] for x in items], rows)
+                bag.write_batch(batch)
+        assert (bag._fast is not None) == fast
+        assert out.read_bytes() == per_message.read_bytes()
+
+
+CHILD_RUN = """
+import sys
+from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies import runner
+
+runner._RunColumns.FLUSH_PUBLICATIONS = 10**9  # nothing reaches the writer before close
+count = 0
+iterate = runner.Drive.__iter__
+
+
+def counted(self):
+    global count
+    for item in iterate(self):
+        count += 1
+        if count == 200:
+            print('running', flush=True)
+        yield item
+
+
+runner.Drive.__iter__ = counted
+try:
+    runner.run_scene(load_scene('shell_robot'), 1e5, sys.argv[1])
+except KeyboardInterrupt:
+    print(count, flush=True)
+"""
+
+
+@pytest.mark.timeout(120)
+def test_ctrl_c_mid_run_writes_every_publication_collected(tmp_path):
+    """The messages still held as columns are handed over when a signal closes the file."""
+    import signal
+    import subprocess
+    import sys
+
+    script = tmp_path / 'child.py'
+    script.write_text(CHILD_RUN)
+    out = tmp_path / 'run.mcap'
+    proc = subprocess.Popen(
+        [sys.executable, str(script), str(out)], stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1],
+    )
+    assert proc.stdout.readline().strip() == 'running', proc.stderr.read()
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    count = int(stdout.split()[-1])
+    info = bag_info(out)
+    assert not info.damaged and not info.truncated
+    states = {info.counts[f'/{t}' if not t.startswith('/') else t] for t in cdr.STATE_TOPICS}
+    assert len(states) == 1  # whole publications
+    (state_count,) = states
+    assert state_count >= count >= 200  # the initial state and every publication yielded
+    assert info.counts['/pulsejet/cmd/cable_force'] in (state_count - 1, state_count)

@@ -4,10 +4,13 @@ Benchmark (not a test): what recording costs an offline run.
 For the default shell scene (shell_robot) and the lumped default (pump_cycle), timed side by side
 in one process, repeats interleaved:
 
-- physics: runner.Drive over the scene (Simulation.step per publication period, the observation
-  after each; no recording);
-- record: runner.run_scene with an MCAP output (what `pulsejet run` times: physics, CDR packed
-  from the values by bag.cdr, MCAP writing and closing);
+- physics: runner.run_scene without an output (Simulation.step per publication period, the
+  observation after each; no recording);
+- record: runner.run_scene with an MCAP output (what `pulsejet run` times: physics, the run's
+  messages collected as columns, encoded a stretch at a time by bag.cdr.ColumnEncoder and
+  written by BagWriter.write_batch, the file closed);
+- per publication: the same file written with one BagWriter.write_records call per publication
+  (the runner before columns; test_recording checks the two files are identical);
 - rclpy record (only when rclpy imports): the same topics written the way the runner did before,
   an rclpy message per sample (ros/messages.py) serialised by rclpy, for comparison;
 - summary: analysis.summarize of the recording (the read-back `pulsejet run` prints after the run;
@@ -46,10 +49,9 @@ TARGET_RATIO = 0.7  # issue: `pulsejet run` at >= 0.7x the speed of the physics 
 
 
 def physics(name: str, duration_s: float) -> float:
-    drive = Drive(load_scene(name), duration_s)
+    scene = load_scene(name)
     start = time.perf_counter()
-    for _ in drive:
-        pass
+    run_scene(scene, duration_s)
     return time.perf_counter() - start
 
 
@@ -62,19 +64,63 @@ def record(name: str, duration_s: float, out: Path) -> float:
 
 def record_without_appending(name: str, duration_s: float, out: Path) -> float:
     """
-    Time run_scene with BagWriter.write_records a no-op: everything but appending the messages.
+    Time run_scene with BagWriter.write_batch a no-op: everything but laying out the messages.
 
-    The model's profile() and energy_ledger(), the CDR packing, opening and closing the file: what
-    bounds the ratio however fast the MCAP writing gets.
+    The collection per publication (the model's profile and ledger), opening and closing the
+    file: what bounds the ratio however fast the encoding and the MCAP appends get.
     """
     from pulsejet_sim.bag.writer import BagWriter
 
-    original = BagWriter.write_records
-    BagWriter.write_records = lambda self, records, log_time_ns: None
+    original = BagWriter.write_batch
+    BagWriter.write_batch = lambda self, batch: None
     try:
         return record(name, duration_s, out)
     finally:
-        BagWriter.write_records = original
+        BagWriter.write_batch = original
+
+
+def write_per_publication(path: Path, name: str, duration_s: float) -> None:
+    """Record a scene with one write_records call per publication: the runner before columns."""
+    from pulsejet_sim.bag import cdr
+    from pulsejet_sim.bag.writer import BagWriter
+    from pulsejet_sim.core.schema import dump_yaml
+
+    scene = load_scene(name)
+    drive = Drive(scene, duration_s)
+    sim, encoder = drive.sim, cdr.TopicEncoder()
+    ledger_every = max(1, int(round(LEDGER_PERIOD_S / (drive.batch * scene.model.dt_s))))
+    with BagWriter(path) as bag:
+        bag.add_metadata('pulsejet', {
+            'scene': scene.name, 'scene_yaml': dump_yaml(dict(scene.data, name=scene.name)),
+        })
+
+        def state(obs, ledger):
+            ns = cdr.stamp_ns(obs.time_s)
+            records = encoder.observation(obs, ns)
+            profile = sim.profile()
+            if profile is not None:
+                records.append((cdr.TOPIC_MANTLE_PROFILE, encoder.profile(*profile, ns)))
+            if ledger:
+                records.append((cdr.TOPIC_ENERGY_LEDGER, encoder.ledger(sim.energy_ledger(), ns)))
+            bag.write_records(records, ns)
+
+        state(sim.observe(), True)
+        last, published = None, 0
+        for start_s, command, obs in drive:
+            ns = cdr.stamp_ns(start_s)
+            records = encoder.commands(command)
+            if command != last:
+                records.append((cdr.TOPIC_APPLIED_COMMAND, encoder.applied_command(command, ns)))
+                last = command
+            bag.write_records(records, ns)
+            published += 1
+            state(obs, published % ledger_every == 0 or published == drive.batches)
+
+
+def record_per_publication(name: str, duration_s: float, out: Path) -> float:
+    start = time.perf_counter()
+    write_per_publication(out, name, duration_s)
+    return time.perf_counter() - start
 
 
 def record_with_rclpy(name: str, duration_s: float, out: Path) -> float:
@@ -166,12 +212,13 @@ def main(argv=None) -> int:
             if with_rclpy:
                 record_with_rclpy(name, 0.2, out)
             times: dict[str, list[float]] = {'physics': [], 'record': [], 'rclpy': [],
-                                             'summary': [], 'no_append': []}
+                                             'summary': [], 'no_append': [], 'per_pub': []}
             for _ in range(args.repeats):  # interleaved: the machine's load hits all alike
                 times['physics'].append(physics(name, args.duration))
                 times['record'].append(record(name, args.duration, out))
                 times['summary'].append(summary(out))
                 times['no_append'].append(record_without_appending(name, args.duration, out))
+                times['per_pub'].append(record_per_publication(name, args.duration, out))
                 if with_rclpy:
                     times['rclpy'].append(record_with_rclpy(name, args.duration, out))
             med = {k: statistics.median(v) for k, v in times.items() if v}
@@ -193,18 +240,20 @@ def main(argv=None) -> int:
     )
     text += (
         f'{args.duration:g} s simulated per run, median of {args.repeats} interleaved repeats '
-        '(wall s, real-time factor in brackets). physics: runner.Drive (observation per '
-        'publication, no recording); record: runner.run_scene to MCAP (bag.cdr bytes, '
-        'zstd chunks); rclpy record: the same topics built as rclpy messages and serialised by '
-        'rclpy (the runner before bag.cdr); without appending: run_scene with write_records a '
-        "no-op (the model's profile and ledger, CDR packing, file open and close: the bound on "
-        'the ratio however fast the MCAP appends get); summary: analysis.summarize reading the '
-        'file back '
-        '(printed by `pulsejet run` after the timed run, not in the ratio). Ratio = physics / '
+        '(wall s, real-time factor in brackets). physics: runner.run_scene without an output '
+        '(observation per publication, no recording); record: runner.run_scene to MCAP (the '
+        "run's messages as columns, encoded a stretch at a time, zstd chunks); per "
+        'publication: the same file with one write_records call per publication (the runner '
+        'before columns); rclpy record: the same topics built as rclpy messages and '
+        'serialised by rclpy (the runner before bag.cdr); without writing: run_scene with '
+        "write_batch a no-op (the collection per publication with the model's profile and "
+        'ledger, file open and close: the bound on the ratio however fast the encoding and the '
+        'MCAP appends get); summary: analysis.summarize reading the file back (printed by '
+        '`pulsejet run` after the timed run, not in the ratio). Ratio = physics / '
         f'record (target >= {TARGET_RATIO}).\n\n'
-        '| scene | physics | record | ratio | rclpy record | ratio | without appending | ratio '
-        '| summary | MCAP size |\n'
-        '|---|---|---|---|---|---|---|---|---|---|\n'
+        '| scene | physics | record | ratio | per publication | ratio | rclpy record | ratio '
+        '| without writing | ratio | summary | MCAP size |\n'
+        '|---|---|---|---|---|---|---|---|---|---|---|---|\n'
     )
 
     def cell(seconds):
@@ -217,7 +266,8 @@ def main(argv=None) -> int:
         )
         text += (
             f'| {name} | {cell(med["physics"])} | {cell(med["record"])} | '
-            f'{med["physics"] / med["record"]:.2f} | {rclpy_cells} | {cell(med["no_append"])} | '
+            f'{med["physics"] / med["record"]:.2f} | {cell(med["per_pub"])} | '
+            f'{med["physics"] / med["per_pub"]:.2f} | {rclpy_cells} | {cell(med["no_append"])} | '
             f'{med["physics"] / med["no_append"]:.2f} | {med["summary"]:.3f} s | '
             f'{size / 1e6:.2f} MB |\n'
         )

@@ -175,6 +175,25 @@ def read_yaml_file(path: Any, what: str | None = None) -> Any:
     return safe_load_yaml(data, what)
 
 
+#: libyaml's emitter and parser when PyYAML was built with it (5-10x faster; the same safe subset)
+_DUMPER = getattr(yaml, 'CSafeDumper', yaml.SafeDumper)
+_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
+
+
+def dump_yaml(data: Any) -> str:
+    """Return YAML text of plain data (keys in their order), as yaml.safe_dump writes it."""
+    return yaml.dump(data, Dumper=_DUMPER, sort_keys=False)
+
+
+def load_own_yaml(text: str) -> Any:
+    """
+    Parse YAML that pulsejet wrote itself (e.g. QoS profiles kept by the bag writer).
+
+    The safe loader; for text from outside use safe_load_yaml(), which also bounds its size.
+    """
+    return yaml.load(text, Loader=_LOADER)
+
+
 class NumberRejected(ValueError):
     """Why a value is not an allowed number: ``reason`` is 'not a number' or 'out of range'."""
 

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
+import operator
 from pathlib import Path
 import threading
+import time
 from typing import Iterator
 
 from pulsejet_sim.core.model_io import Command, Observation, SimulationBlowUp
@@ -21,6 +23,10 @@ from pulsejet_sim.routines import routine_from_scene
 from pulsejet_sim.scene import Scene
 
 LEDGER_PERIOD_S = 0.2  # energy ledger messages at 5 Hz, as sim_node publishes them
+#: the Observation fields the state topics carry (bag.cdr.ColumnEncoder.state's names)
+STATE_FIELDS = (
+    'mantle_radius_m', 'volume_m3', 'velocity_m_s', 'thrust_n', 'fluid_mass_kg', 'position_m'
+)
 
 
 def steps_per_publication(scene: Scene) -> int:
@@ -95,11 +101,8 @@ def run_scene(
 
 
 def _record(drive: Drive, out: Path) -> RunResult:
-    from pulsejet_sim.bag.cdr import stamp_ns, TopicEncoder
     from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
-    from pulsejet_sim.core.topics import TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER
-    from pulsejet_sim.core.topics import TOPIC_MANTLE_PROFILE
-    import yaml
+    from pulsejet_sim.core.schema import dump_yaml
 
     sim, scene = drive.sim, drive.scene
     ledger_every = max(1, int(round(LEDGER_PERIOD_S / (drive.batch * scene.model.dt_s))))
@@ -109,49 +112,131 @@ def _record(drive: Drive, out: Path) -> RunResult:
         'pulsejet',
         {
             'scene': scene.name,
-            'scene_yaml': yaml.safe_dump(dict(scene.data, name=scene.name), sort_keys=False),
+            'scene_yaml': dump_yaml(dict(scene.data, name=scene.name)),
         },
     )
+    columns = _RunColumns(writer)
+    writer.on_close(columns.flush)
     # Ctrl-C or SIGTERM during a long offline run still leaves a complete, readable file
     restore_signals = (
         install_signal_handlers(writer)
         if threading.current_thread() is threading.main_thread()
         else None
     )
-    # CDR straight from the values (bag.cdr): the bytes sim_node's rclpy messages serialise to
-    encoder = TopicEncoder()
-    write = writer.write_records
-
-    def write_state(obs: Observation, ledger: bool) -> None:
-        ns = stamp_ns(obs.time_s)
-        records = encoder.observation(obs, ns)
-        profile = sim.profile()
-        if profile is not None:
-            records.append((TOPIC_MANTLE_PROFILE, encoder.profile(*profile, ns)))
-        if ledger:
-            records.append((TOPIC_ENERGY_LEDGER, encoder.ledger(sim.energy_ledger(), ns)))
-        write(records, ns)
-
     published = 0
-    last_applied = None
     try:
-        write_state(sim.observe(), ledger=True)
+        columns.state(sim, sim.observe(), ledger=True)
         for start_s, command, obs in drive:
-            ns = stamp_ns(start_s)
-            records = encoder.commands(command)
-            if command != last_applied:
-                records.append((TOPIC_APPLIED_COMMAND, encoder.applied_command(command, ns)))
-                last_applied = command
-            write(records, ns)
+            columns.commands(start_s, command)
             published += 1
-            write_state(obs, ledger=published % ledger_every == 0 or published == drive.batches)
+            columns.state(
+                sim, obs, ledger=published % ledger_every == 0 or published == drive.batches
+            )
         if drive.fault is not None:
-            write_state(sim.observe(), ledger=True)
+            columns.state(sim, sim.observe(), ledger=True)
     finally:
-        writer.close()
+        writer.close()  # hands the last columns over first (on_close)
         if restore_signals is not None:
             restore_signals()
     return RunResult(path=out, sim=sim, publications=published, fault=drive.fault)
+
+
+class _RunColumns:
+    """
+    The run's messages as columns, written a stretch at a time (bag.batch, bag.cdr.ColumnEncoder).
+
+    Per publication only one tuple is appended (one bytecode, so a signal handler that closes the
+    writer mid-run sees whole publications); flush() encodes each topic's messages at once. The
+    order keys put a publication's commands before its state, each group in the order sim_node
+    publishes it, so the file is the one a write_records call per publication writes.
+    """
+
+    FLUSH_PUBLICATIONS = 250  # about 0.3 MB of messages per flush for the default shell scene
+    # slots within a publication: commands, the applied command, state topics, profile, ledger
+    SLOT_APPLIED, SLOT_STATE, SLOT_PROFILE, SLOT_LEDGER, SLOTS = 3, 4, 11, 12, 16
+
+    def __init__(self, writer) -> None:
+        from pulsejet_sim.bag.cdr import ColumnEncoder
+        from pulsejet_sim.core.topics import APPLIED_COMMAND_NAMES
+
+        self.writer = writer
+        self.encoder = ColumnEncoder()
+        self.command_values = operator.attrgetter(*APPLIED_COMMAND_NAMES)  # the encoder's columns
+        self.state_values = operator.attrgetter(*STATE_FIELDS)
+        self.publication = 0
+        self.last_values: tuple | None = None
+        self.command_rows: list[tuple] = []
+        self.state_rows: list[tuple] = []
+        self.since = time.monotonic()
+
+    def commands(self, start_s: float, command: Command) -> None:
+        """Add the command sent at start_s; the applied command too when it changed."""
+        self.publication += 1
+        values = self.command_values(command)
+        self.command_rows.append((self.publication, start_s, values != self.last_values, values))
+        self.last_values = values
+
+    def state(self, sim: Simulation, obs: Observation, ledger: bool) -> None:
+        """Add the state after a publication's steps (its profile, and the ledger if asked)."""
+        from pulsejet_sim.bag.cdr import stamp_ns
+
+        self.state_rows.append((
+            self.publication, obs.time_s, self.state_values(obs), sim.profile(),
+            self.encoder.encoder.ledger(sim.energy_ledger(), stamp_ns(obs.time_s))
+            if ledger else None,
+        ))
+        if (
+            len(self.state_rows) >= self.FLUSH_PUBLICATIONS
+            or time.monotonic() - self.since >= 0.5 * self.writer.flush_period_s
+        ):
+            self.flush()
+
+    def flush(self) -> None:
+        """Encode what was added, topic by topic, and write it as one batch."""
+        from pulsejet_sim.bag.batch import RecordBatch
+        from pulsejet_sim.bag.cdr import stamps_ns
+        from pulsejet_sim.core.topics import (
+            TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER, TOPIC_MANTLE_PROFILE,
+        )
+        import numpy as np
+
+        commands, self.command_rows = self.command_rows, []
+        states, self.state_rows = self.state_rows, []
+        self.since = time.monotonic()
+        batch = RecordBatch()
+        enc, slots = self.encoder, self.SLOTS
+        if commands:
+            keys = np.array([row[0] for row in commands]) * slots
+            ns = stamps_ns([row[1] for row in commands])
+            values = np.array([row[3] for row in commands], dtype=np.float64)
+            for slot, (topic, rows) in enumerate(enc.commands(values)):
+                batch.add(topic, keys + slot, ns, rows)
+            applied = np.array([row[2] for row in commands], dtype=bool)
+            batch.add(
+                TOPIC_APPLIED_COMMAND, keys[applied] + self.SLOT_APPLIED, ns[applied],
+                enc.applied_commands(ns[applied], values[applied]),
+            )
+        if states:
+            keys = np.array([row[0] for row in states]) * slots
+            ns = stamps_ns([row[1] for row in states])
+            values = np.array([row[2] for row in states], dtype=np.float64)
+            named = dict(zip(STATE_FIELDS, values.T))
+            for slot, (topic, rows) in enumerate(enc.state(ns, named), start=self.SLOT_STATE):
+                batch.add(topic, keys + slot, ns, rows)
+            profiled = np.array([row[3] is not None for row in states], dtype=bool)
+            if profiled.any():
+                r_m = np.array([row[3][0] for row in states if row[3] is not None])
+                z_m = np.array([row[3][1] for row in states if row[3] is not None])
+                batch.add(
+                    TOPIC_MANTLE_PROFILE, keys[profiled] + self.SLOT_PROFILE, ns[profiled],
+                    enc.profiles(ns[profiled], r_m, z_m),
+                )
+            ledgers = [i for i, row in enumerate(states) if row[4] is not None]
+            batch.add(
+                TOPIC_ENERGY_LEDGER, keys[ledgers] + self.SLOT_LEDGER, ns[ledgers],
+                [states[i][4] for i in ledgers],
+            )
+        self.writer.write_batch(batch)
 
 
 def default_output(scene: Scene) -> Path:

@@ -11,6 +11,7 @@ The derivation, the choices where the paper is ambiguous and the energy ledger a
 from __future__ import annotations
 
 from dataclasses import dataclass
+import functools
 import math
 from typing import Any, Mapping
 
@@ -740,10 +741,15 @@ class LumpedModel:
 
     def profile(self, state: np.ndarray):
         """Meridian of the ellipsoid (r, z), z from bow (+a) to stern (-a)."""
+        z, shape = self._meridian
+        return state[K.Y_B] * shape, z.copy()
+
+    @functools.cached_property
+    def _meridian(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return the 41 stations z and r/b there (a is fixed: only b scales a profile)."""
         a = self.params[K.P_A]
         z = np.linspace(a, -a, 41)
-        r = state[K.Y_B] * np.sqrt(np.clip(1.0 - (z / a) ** 2, 0.0, None))
-        return r, z
+        return z, np.sqrt(np.clip(1.0 - (z / a) ** 2, 0.0, None))
 
     def stable_step_s(self, state: np.ndarray) -> float:
         """Largest step RK4 keeps stable without sub-steps at this state."""
