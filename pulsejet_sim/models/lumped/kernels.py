@@ -331,56 +331,44 @@ def nozzle(flags, b, p):
     return a_n, d_n, inertance, dinertance_db
 
 
-@njit(cache=True, nogil=True, fastmath=False)
-def rhs(flags, y, valve, q_cmd, p, dy, diag):
+@njit(cache=True, nogil=True, inline='always')
+def pump_flow_rate(q_cmd, q_p, f_el, v_b, p):
     """
-    Time derivatives of y at fixed valve opening and pump command; fills diag.
+    Return dq_p/dt of the pump's first-order spin-up towards its pressure-limited flow.
 
-    Every force that the energy-consistent coupling applies is computed (its ``*_ref`` value); the
-    coupling decides which are applied, and the ledger books the power of the difference as
-    created energy (``Y_C_*``).
+    The pump's pressure-flow curve (a positive-displacement pump with a relief valve): full flow
+    up to the relief pressure of the shell's elastic pressure f_el / V_b, none at the stall
+    pressure, linear between; it keeps any command sequence from inflating the shell past its
+    bound.
     """
-    rho = p[P_RHO]
-    a = p[P_A]
-    u = y[Y_U]
-    b = y[Y_B]
-    w = y[Y_W]
-    q_p = y[Y_QP]
-    c_a = 8.0 / 3.0 * math.pi * a
-    v_b = c_a * b  # dV/db, m^2
-    # the pump's pressure-flow curve (a positive-displacement pump with a relief valve): full flow
-    # up to the relief pressure of the shell's elastic pressure k (b - b0) / V_b, none at the stall
-    # pressure, linear between; it keeps any command sequence from inflating the shell past its
-    # bound
-    # the shell's elastic force dU/db and stiffness (the linear spring k (b - b0), k by default)
-    _, f_el, k_el = shell_elastic(flags, b, p)
     q_target = q_cmd
     if q_cmd > 0.0:
         p_el = f_el / v_b
         if p_el > p[P_P_RELIEF]:
             q_target = q_cmd * max(0.0, (p[P_P_STALL] - p_el) / (p[P_P_STALL] - p[P_P_RELIEF]))
-    dq_p = (q_target - q_p) / p[P_PUMP_TAU]
-    volume = c_a * b * b / 2.0  # 4/3 pi a b^2
-    a_n, d_n, inertance, dinertance_db = nozzle(flags, b, p)
+    return (q_target - q_p) / p[P_PUMP_TAU]
 
-    # shell inertia of the b mode (the nozzle part depends on the flow and is added below)
-    m_shell, _ = shell_inertia(flags, p)
-    m_l = inertance * v_b * v_b
 
-    # outer flow
+@njit(cache=True, nogil=True, inline='always')
+def outer_flow(flags, b, u, p):
+    """
+    Return the outer water's (m_x, dm_x/db, k_x, k_x b applied, R_x reference, R_x applied).
+
+    Added mass m_x (Lamb's or the simplified form); the paper's fluid stiffness k_x (section 3.5,
+    eq. 10), applied as k_x b in eq. 3 by the paper coupling and a reported diagnostic only in the
+    consistent one; the outer flow's pull on the shell that pays for d(1/2 m_x U^2)/dt,
+    R_x = 1/2 dm_x/db U^2, applied by the consistent coupling.
+    """
     m_x = 0.0
     dmx_db = 0.0
     if flags & (T_ADDED_MASS | T_ADDED_MASS_VARIATION):
         m_x, dmx_db = added_mass(flags, b, p)
-    # the paper's fluid stiffness k_x (section 3.5, eq. 10): applied as k_x b in eq. 3 by the paper
-    # coupling; a reported diagnostic only in the consistent one
     k_x = 0.0
     f_kx = 0.0
     if flags & T_FLUID_STIFFNESS:
         _, k_x = fluid_stiffness_force(b, u, p)
         if not flags & O_COUPLING_CONSISTENT:
             f_kx = k_x * b
-    # the outer flow's pull on the shell that pays for d(1/2 m_x U^2)/dt: R_x = 1/2 dm_x/db U^2
     reaction_ref = 0.0
     if flags & T_ADDED_MASS_VARIATION:
         reaction_ref = 0.5 * dmx_db * u * u
@@ -388,82 +376,92 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
     if flags & O_COUPLING_CONSISTENT:
         if flags & T_FLUID_STIFFNESS:
             reaction = reaction_ref
+    return m_x, dmx_db, k_x, f_kx, reaction_ref, reaction
 
-    sealed = valve <= 0.0
-    damping_rate = 0.0
+
+@njit(cache=True, nogil=True, inline='always')
+def open_cavity(
+    flags, valve, w, q_p, dq_p, c_a, v_b, a_n, d_n, inertance, dinertance_db, m_shell, m_l,
+    load, p,
+):
+    """
+    Return the open cavity's nozzle flow and the shell's b acceleration.
+
+    load: the shell's elastic, fluid-stiffness and outer-flow force on b (-f_el - f_kx + R_x).
+    Returns (q_n, dw, p_cav, dp_visc, dp_valve, dp_jet_ref, m_b_total, damping_rate, c_jet,
+    c_nozzle): nozzle flow, b acceleration, cavity pressure at the nozzle inlet, the three
+    pressure drops (viscous, valve, Bernoulli), the b mode's mass with the nozzle water, the
+    flow's damping rate of b, and the paper coupling's created powers of the jet and nozzle.
+    """
+    rho = p[P_RHO]
     c_jet = 0.0
     c_nozzle = 0.0
-    if sealed:
-        # valve shut: incompressible water, the pump alone sets the volume rate
-        q_n = 0.0
-        dw = (dq_p - c_a * w * w) / v_b
-        p_cav = (m_shell * dw + f_el + f_kx - reaction) / v_b
-        dp_visc = 0.0
-        dp_valve = 0.0
-        dp_jet_ref = 0.0
-        m_b_total = m_shell
+    q_n = q_p - v_b * w
+    u_n = q_n / a_n
+    sgn = 1.0 if u_n >= 0.0 else -1.0
+    dp_visc = 0.0
+    dpdq = 0.0
+    if flags & T_VISCOUS_LOSS:
+        # the paper's c b' (section 3.3): Darcy's laminar f = 64/Re along the nozzle plus a
+        # square-edged inlet coefficient, dp = 1/2 rho (f L/d + K) u_n^2
+        lam = 32.0 * p[P_MU] * p[P_L_N] / (d_n * d_n)
+        dp_visc = lam * u_n + sgn * 0.5 * rho * p[P_K_INLET] * u_n * u_n
+        dpdq += (lam + rho * p[P_K_INLET] * abs(u_n)) / a_n
+    # valve as an orifice at the nozzle inlet: Borda-Carnot loss of the contraction to
+    # valve*A_n
+    contraction = 1.0 / valve - 1.0
+    dp_valve = sgn * 0.5 * rho * contraction * contraction * u_n * u_n
+    dpdq += rho * contraction * contraction * abs(u_n) / a_n
+    # Bernoulli pressure that accelerates the jet, and the convective part of the nozzle
+    # inertia (m_l = Lambda V_b^2 depends on b: 1/2 dm_l/db b'^2 = Lambda V_b c_a b'^2)
+    dp_jet_ref = sgn * 0.5 * rho * u_n * u_n
+    dp_jet = 0.0
+    convective = 0.0
+    # a nozzle whose section follows the shell: Lagrange's equation of its water's kinetic
+    # energy 1/2 Lambda(b) Q_n^2 has dLambda/db Q_n (V_b b' + Q_n/2) besides the terms of a
+    # rigid one (with the pump off the two cancel: m_l is then a constant)
+    dilation = 0.0
+    if flags & O_NOZZLE_FOLLOWS_SHELL:
+        dilation = dinertance_db * q_n * (v_b * w + 0.5 * q_n)
+    if flags & O_COUPLING_CONSISTENT:
+        dp_jet = dp_jet_ref
+        dpdq += rho * abs(u_n) / a_n
+        convective = c_a * w * w
     else:
-        q_n = q_p - v_b * w
-        u_n = q_n / a_n
-        sgn = 1.0 if u_n >= 0.0 else -1.0
-        dp_visc = 0.0
-        dpdq = 0.0
-        if flags & T_VISCOUS_LOSS:
-            # the paper's c b' (section 3.3): Darcy's laminar f = 64/Re along the nozzle plus a
-            # square-edged inlet coefficient, dp = 1/2 rho (f L/d + K) u_n^2
-            lam = 32.0 * p[P_MU] * p[P_L_N] / (d_n * d_n)
-            dp_visc = lam * u_n + sgn * 0.5 * rho * p[P_K_INLET] * u_n * u_n
-            dpdq += (lam + rho * p[P_K_INLET] * abs(u_n)) / a_n
-        # valve as an orifice at the nozzle inlet: Borda-Carnot loss of the contraction to
-        # valve*A_n
-        contraction = 1.0 / valve - 1.0
-        dp_valve = sgn * 0.5 * rho * contraction * contraction * u_n * u_n
-        dpdq += rho * contraction * contraction * abs(u_n) / a_n
-        # Bernoulli pressure that accelerates the jet, and the convective part of the nozzle
-        # inertia (m_l = Lambda V_b^2 depends on b: 1/2 dm_l/db b'^2 = Lambda V_b c_a b'^2)
-        dp_jet_ref = sgn * 0.5 * rho * u_n * u_n
-        dp_jet = 0.0
-        convective = 0.0
-        # a nozzle whose section follows the shell: Lagrange's equation of its water's kinetic
-        # energy 1/2 Lambda(b) Q_n^2 has dLambda/db Q_n (V_b b' + Q_n/2) besides the terms of a
-        # rigid one (with the pump off the two cancel: m_l is then a constant)
-        dilation = 0.0
+        c_jet = -v_b * dp_jet_ref * w
+        c_nozzle = inertance * v_b * c_a * w * w * w
         if flags & O_NOZZLE_FOLLOWS_SHELL:
-            dilation = dinertance_db * q_n * (v_b * w + 0.5 * q_n)
-        if flags & O_COUPLING_CONSISTENT:
-            dp_jet = dp_jet_ref
-            dpdq += rho * abs(u_n) / a_n
-            convective = c_a * w * w
-        else:
-            c_jet = -v_b * dp_jet_ref * w
-            c_nozzle = inertance * v_b * c_a * w * w * w
-            if flags & O_NOZZLE_FOLLOWS_SHELL:
-                c_nozzle -= dilation * w
-                dilation = 0.0
-        dp_n = dp_visc + dp_valve + dp_jet
-        m_b_total = m_shell + m_l
-        force = (
-            -f_el
-            - f_kx
-            + reaction
-            + v_b * dp_n
-            + inertance * v_b * (dq_p - convective)
-        )
-        if flags & O_NOZZLE_FOLLOWS_SHELL:
-            force += dilation
-        dw = force / m_b_total
-        # cavity pressure at the nozzle inlet: what the nozzle flow needs (drop + acceleration);
-        # the same definition in both couplings, so the pump's work is the same physical quantity
-        dq_n = dq_p - c_a * w * w - v_b * dw
-        p_cav = dp_visc + dp_valve + dp_jet_ref + inertance * dq_n
-        if flags & O_NOZZLE_FOLLOWS_SHELL:
-            p_cav += dinertance_db * w * q_n
-        damping_rate = v_b * v_b * dpdq / m_b_total
-    spring = k_el
-    if not flags & O_COUPLING_CONSISTENT:
-        spring += k_x
+            c_nozzle -= dilation * w
+            dilation = 0.0
+    dp_n = dp_visc + dp_valve + dp_jet
+    m_b_total = m_shell + m_l
+    force = load + v_b * dp_n + inertance * v_b * (dq_p - convective)
+    if flags & O_NOZZLE_FOLLOWS_SHELL:
+        force += dilation
+    dw = force / m_b_total
+    # cavity pressure at the nozzle inlet: what the nozzle flow needs (drop + acceleration);
+    # the same definition in both couplings, so the pump's work is the same physical quantity
+    dq_n = dq_p - c_a * w * w - v_b * dw
+    p_cav = dp_visc + dp_valve + dp_jet_ref + inertance * dq_n
+    if flags & O_NOZZLE_FOLLOWS_SHELL:
+        p_cav += dinertance_db * w * q_n
+    damping_rate = v_b * v_b * dpdq / m_b_total
+    return (
+        q_n, dw, p_cav, dp_visc, dp_valve, dp_jet_ref, m_b_total, damping_rate, c_jet, c_nozzle
+    )
 
-    # vehicle
+
+@njit(cache=True, nogil=True, inline='always')
+def vehicle_forces(flags, u, b, w, q_p, q_n, a_n, volume, m_x, dmx_db, p):
+    """
+    Return the vehicle's mass and axial forces (kg, N, m^3/s; forward +).
+
+    (mass, thrust, drag, added-mass variation force, inflow, ram reference, ram applied). The mass carries the water inside (T_FLUID_MASS) and the added mass; the jet's momentum
+    thrust rho Q_n^2 / A_n while water leaves; the body's quadratic drag; -dm_x/db b' U; water
+    drawn in at rest must be brought to the vehicle's speed (the ram, rho Q_in U; eq. 1 has no
+    such term, the consistent coupling applies it).
+    """
+    rho = p[P_RHO]
     m_vehicle = p[P_M_SOLID]
     if flags & T_FLUID_MASS:
         m_vehicle += rho * (volume - p[P_V_SOLID])
@@ -484,11 +482,66 @@ def rhs(flags, y, valve, q_cmd, p, dy, diag):
         q_in -= q_n
     ram_ref = 0.0
     if flags & T_FLUID_MASS:
-        # water drawn in at rest must be brought to the vehicle's speed (eq. 1 has no such term)
         ram_ref = rho * q_in * u
     ram = 0.0
     if flags & O_COUPLING_CONSISTENT:
         ram = ram_ref
+    return m_vehicle, thrust, drag, amv_force, q_in, ram_ref, ram
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def rhs(flags, y, valve, q_cmd, p, dy, diag):
+    """
+    Time derivatives of y at fixed valve opening and pump command; fills diag.
+
+    Every force that the energy-consistent coupling applies is computed (its ``*_ref`` value); the
+    coupling decides which are applied, and the ledger books the power of the difference as
+    created energy (``Y_C_*``). The stages (pump, shell, outer flow, cavity and nozzle, vehicle)
+    are inlined functions: one compiled body, the same arithmetic in the same order.
+    """
+    rho = p[P_RHO]
+    a = p[P_A]
+    u = y[Y_U]
+    b = y[Y_B]
+    w = y[Y_W]
+    q_p = y[Y_QP]
+    c_a = 8.0 / 3.0 * math.pi * a
+    v_b = c_a * b  # dV/db, m^2
+    # the shell's elastic force dU/db and stiffness (the linear spring k (b - b0), k by default)
+    _, f_el, k_el = shell_elastic(flags, b, p)
+    dq_p = pump_flow_rate(q_cmd, q_p, f_el, v_b, p)
+    volume = c_a * b * b / 2.0  # 4/3 pi a b^2
+    a_n, d_n, inertance, dinertance_db = nozzle(flags, b, p)
+    # shell inertia of the b mode (the nozzle part depends on the flow and is added below)
+    m_shell, _ = shell_inertia(flags, p)
+    m_l = inertance * v_b * v_b
+    m_x, dmx_db, k_x, f_kx, reaction_ref, reaction = outer_flow(flags, b, u, p)
+
+    if valve <= 0.0:
+        # valve shut: incompressible water, the pump alone sets the volume rate
+        q_n = 0.0
+        dw = (dq_p - c_a * w * w) / v_b
+        p_cav = (m_shell * dw + f_el + f_kx - reaction) / v_b
+        dp_visc = 0.0
+        dp_valve = 0.0
+        dp_jet_ref = 0.0
+        m_b_total = m_shell
+        damping_rate = 0.0
+        c_jet = 0.0
+        c_nozzle = 0.0
+    else:
+        (q_n, dw, p_cav, dp_visc, dp_valve, dp_jet_ref, m_b_total, damping_rate, c_jet,
+         c_nozzle) = open_cavity(
+            flags, valve, w, q_p, dq_p, c_a, v_b, a_n, d_n, inertance, dinertance_db, m_shell,
+            m_l, -f_el - f_kx + reaction, p,
+        )
+    spring = k_el
+    if not flags & O_COUPLING_CONSISTENT:
+        spring += k_x
+
+    m_vehicle, thrust, drag, amv_force, q_in, ram_ref, ram = vehicle_forces(
+        flags, u, b, w, q_p, q_n, a_n, volume, m_x, dmx_db, p
+    )
     du = (thrust - drag + amv_force - ram) / m_vehicle
 
     dy[Y_X] = u
