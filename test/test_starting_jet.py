@@ -238,7 +238,7 @@ def test_ledger_closes_at_second_order_with_the_starting_jet():
 
 
 def _pinched_cone(dt, formation_number):
-    """The cone with a fixed 12.5 mm outlet, whose first pulse passes L/D = F while accelerating."""
+    """Return the cone with a fixed 12.5 mm outlet: its first pulse passes L/D = F accelerating."""
     scene = cone_scene('consistent', dt, jet={'outlet': 'ring', 'outlet_radius_m': 0.0125})
     scene['jet'].update(starting_jet=True, formation_number=formation_number)
     return ShellModel.from_scene(scene)
@@ -277,7 +277,7 @@ def test_the_shells_trajectory_converges_at_second_order_where_pinch_off_binds()
 
 
 def test_the_ledger_closes_at_second_order_where_pinch_off_binds():
-    """The crossing step's over-pressure is booked with the step's midpoint quantities: ratio ~4."""
+    """The crossing step's over-pressure is booked with the step's midpoint values: ratio ~4."""
     closures = []
     for dt in (2e-3, 1e-3):
         model = _pinched_cone(dt, 0.8)
