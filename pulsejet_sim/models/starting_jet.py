@@ -32,9 +32,11 @@ Shariff 1998, J. Fluid Mech. 360, 121: the stroke ratio L/D of a piston-cylinder
 2005, J. Fluid Mech. 538, not looked up here, integrate ``u/D(t)`` for a nozzle whose diameter
 changes), grows while water leaves and is
 reset to 0 when the outflow stops (the volume rate is no longer negative: the valve closes or the
-mantle refills).  A step that starts at ``T* >= F`` (the formation number, 4 by default, Gharib
-et al. 1998) carries no over-pressure: the ring has pinched off and the trailing jet is
-quasi-steady.
+mantle refills).  Once ``T*`` reaches ``F`` (the formation number, 4 by default, Gharib et al.
+1998) there is no over-pressure: the ring has pinched off and the trailing jet is quasi-steady.
+The step in which ``T*`` crosses ``F`` books the outflow's rise up to the crossing only (its share
+of the step, ``T*`` growing linearly within it, at the previous step's rate), so the impulse and
+the trajectory converge at the integrator's order where ``F`` binds.
 
 *Energy.*  The over-pressure acts on the cavity wall (the cavity pressure rises by ``p_ex``, so
 the wall and the actuator pay), and ``A p_ex`` is added to the thrust on the vehicle.  The work
@@ -44,10 +46,16 @@ nothing is created, and the ledger keeps the integrator's closure.
 
 *Discretisation* (implicit theta-scheme of shell.kernels, step ``dt``).  With ``Q = grad V . v``
 the cavity's volume rate (``Q < 0`` on outflow, ``u_j = -Q/A``), the step's over-pressure impulse
-per unit area is ``j = kappa min(Q_end - min(Q_start, 0), 0)`` (taken only when ``Q_end < 0``;
-``kappa = m_d / A^2`` with the outlet area at the step's start), added to the shell's residual
-as ``j grad V`` (a uniform cavity pressure ``p_ex = -j/dt``) and to the vehicle's as the thrust
-``-A j/dt``.  ``min(Q_start, 0)``: the inflow's stopping is not the ring's start.
+per unit area is ``j = kappa min(Q_end - min(Q_peak, 0), 0)`` (taken only when ``Q_end < 0``
+and ``T* < F`` at the step's start; ``kappa = m_d / A^2`` with the outlet area at the step's
+start), added to the shell's residual as ``j grad V`` (a uniform cavity pressure
+``p_ex = -j/dt``) and to the vehicle's as the thrust ``-A j/dt``.  ``Q_peak`` is the pulse's
+running peak outflow (the most negative ``Q_end`` of its steps so far, a state slot updated at
+the step's end and reset with ``T*``): only an outflow beyond the pulse's previous peak is
+booked, so a rippled pulse books ``m_d u_peak`` once; and an inflow's stopping is not a ring's
+start.  The step predicted to cross ``T* = F`` (``crosses_formation_number``) books instead
+``j = kappa s r_prev``: ``s`` the share of the step before the crossing (``pinch_off_share``),
+``r_prev`` the previous step's booked rise (a state slot), see ``step_overpressure_impulse``.
 
 *Cache.*  shell.kernels compiles these njit functions into its own cached kernels, and numba
 invalidates a cache entry when the caller's file changes, not this one: after changing the code
@@ -98,16 +106,93 @@ def forming(formation_time, formation_number):
 
 
 @njit(cache=True, nogil=True)
-def overpressure_impulse(kappa, q_start, q_end):
+def overpressure_impulse(kappa, q_peak, q_end):
     """
     Return the step's over-pressure impulse per unit area ``j`` (Pa s, <= 0); kappa > 0: forming.
 
-    ``q_start``, ``q_end``: the cavity's volume rate at the step's start and end, m^3/s
-    (negative on outflow).  ``p_ex = -j/dt`` on the wall, ``-A j/dt`` added to the thrust.
+    ``q_peak``: the pulse's running peak outflow before the step (the most negative volume rate
+    at the ends of the pulse's previous steps, m^3/s; 0 at a pulse's start); ``q_end``: the
+    cavity's volume rate at the step's end, m^3/s (negative on outflow).  Only an outflow beyond
+    the pulse's previous peak is booked, so a pulse books ``m_d u_peak`` whatever its ripple.
+    ``p_ex = -j/dt`` on the wall, ``-A j/dt`` added to the thrust.
     """
     if q_end >= 0.0:
         return 0.0
-    return kappa * min(q_end - min(q_start, 0.0), 0.0)
+    return kappa * min(q_end - min(q_peak, 0.0), 0.0)
+
+
+@njit(cache=True, nogil=True)
+def crosses_formation_number(formation_time, q_start, area_m2, dt, formation_number):
+    """
+    Return whether the step is predicted to carry T* past ``formation_number`` (pinch-off in it).
+
+    From the step's start: ``T* + u_j dt / D >= F`` with the jet speed ``-q_start / A`` at the
+    step's start (``q_start`` m^3/s, negative on outflow).  The prediction does not depend on the
+    step's unknowns, so the implicit step keeps one form of the over-pressure while it iterates.
+    """
+    if q_start >= 0.0:
+        return False
+    return formation_time + (-q_start / area_m2) * dt / nozzle_diameter_m(area_m2) >= (
+        formation_number
+    )
+
+
+@njit(cache=True, nogil=True)
+def pinch_off_share(formation_time, q_mid, area_m2, dt, formation_number):
+    """
+    Return the share of the step before the formation time reaches ``formation_number`` (0 to 1).
+
+    ``formation_time``: T* at the step's start (< F while the ring forms); its increment over the
+    step is ``u_j dt / D`` from the mean volume rate ``q_mid`` (m^3/s), as in
+    ``next_formation_time``.  T* grows linearly within the step, so pinch-off comes at the share
+    ``(F - T*) / increment`` of it.  1 when the step ends before pinch-off (or water does not
+    leave: T* does not grow).
+    """
+    rest = formation_number - formation_time
+    if rest <= 0.0:
+        return 0.0
+    if q_mid >= 0.0:
+        return 1.0
+    increment = (-q_mid / area_m2) * dt / nozzle_diameter_m(area_m2)
+    if increment <= rest:
+        return 1.0
+    return rest / increment
+
+
+@njit(cache=True, nogil=True)
+def step_overpressure_impulse(kappa, q_peak, q_end, crossing, share, last_rise):
+    """
+    Return a forming step's over-pressure impulse per unit area ``j`` (Pa s, <= 0).
+
+    A step that does not reach pinch-off books the outflow beyond the pulse's peak,
+    ``overpressure_impulse(kappa, q_peak, q_end)``: implicit, the ring's inertia.  The step in
+    which T* reaches F (``crossing``) books only the rise up to pinch-off, ``share`` of the step at
+    the rate of the previous step's booked rise ``last_rise`` (m^3/s, <= 0): once the ring's
+    inertia is gone the outflow accelerates faster (the jet has less water to push), so the
+    step's own rise ``q_end - q_peak`` is not the rate before pinch-off, and scaling it by the
+    share would leave an error of first order in dt.  The previous step's rate is the rate
+    before pinch-off to first order, so the crossing step's impulse is right to second order and
+    the trajectory keeps the integrator's order (docs/theory/starting_jet.md).
+    """
+    if crossing:
+        return kappa * share * last_rise
+    return overpressure_impulse(kappa, q_peak, q_end)
+
+
+@njit(cache=True, nogil=True)
+def next_peak_outflow(q_peak, q_mid, q_end, q_booked):
+    """
+    Return the pulse's running peak outflow after a step (m^3/s, <= 0), reset with T*.
+
+    While water leaves (``q_mid < 0``) the peak is the most negative end-of-step volume rate so
+    far, ``min(q_peak, q_end)``.  When the outflow stops (``q_mid >= 0``: T* restarts) the next
+    pulse starts from what this step booked of its outflow, ``q_booked = j / kappa`` before the
+    crossing's share (<= 0; 0 where nothing was booked), so a pulse books its peak once.  Past
+    pinch-off the peak books nothing until the reset: callers pass ``q_end = 0`` there.
+    """
+    if q_mid >= 0.0:
+        return q_booked
+    return min(q_peak, q_end)
 
 
 @njit(cache=True, nogil=True)
@@ -130,7 +215,8 @@ def piston_impulses(u_j, dt, diameter_m, rho, formation_number):
 
     ``u_j[k]`` the jet speed at ``t = k dt`` (m/s, >= 0).  Returns (slug impulse rho A int u^2 dt,
     over-pressure impulse int A p_ex dt, stroke ratio L/D = int u dt / D, over-pressure work
-    int A p_ex u dt), by the same step functions the shell kernel calls, with midpoint speeds.
+    int A p_ex u dt), by the same step functions the shell kernel calls, with midpoint speeds:
+    the pulse's running peak, and the pinch-off rule of the step that crosses ``T* = F``.
     """
     area = math.pi * 0.25 * diameter_m * diameter_m
     kappa = ring_inertance(rho, area)
@@ -139,18 +225,31 @@ def piston_impulses(u_j, dt, diameter_m, rho, formation_number):
     stroke = 0.0
     work = 0.0
     t_form = 0.0
+    q_peak = 0.0
+    last_rise = 0.0
     for k in range(u_j.size - 1):
         q0 = -area * u_j[k]
         q1 = -area * u_j[k + 1]
         um = 0.5 * (u_j[k] + u_j[k + 1])
+        qm = -area * um
         j = 0.0
+        rise = 0.0
+        q_end_kept = 0.0  # past pinch-off the peak is kept (it books nothing until the reset)
         if forming(t_form, formation_number):
-            j = overpressure_impulse(kappa, q0, q1)
+            rise = overpressure_impulse(1.0, q_peak, q1)
+            j = step_overpressure_impulse(
+                kappa, q_peak, q1,
+                crosses_formation_number(t_form, q0, area, dt, formation_number),
+                pinch_off_share(t_form, qm, area, dt, formation_number), last_rise,
+            )
+            q_end_kept = q1
         i_over += -area * j
         work += -area * j * um
         i_slug += rho * area * um * um * dt
         stroke += um * dt
-        t_form = next_formation_time(t_form, -area * um, area, dt)
+        q_peak = next_peak_outflow(q_peak, qm, q_end_kept, rise)
+        last_rise = rise
+        t_form = next_formation_time(t_form, qm, area, dt)
     return i_slug, i_over, stroke / diameter_m, work
 
 

@@ -138,7 +138,13 @@ S_CREATED_MOM = 19
 # jet.starting_jet (models/starting_jet.py): the current pulse's formation time int u_j/D dt, and
 # the exit over-pressure's work that left with the jet (part of S_JET), J
 S_FORMATION_TIME, S_OVERPRESSURE_WORK = 20, 21
-N_TAIL = 22
+# jet.starting_jet: the current pulse's running peak outflow (the most negative end-of-step volume
+# rate, m^3/s, <= 0), reset with the formation time: only an outflow beyond it books over-pressure
+S_PEAK_OUTFLOW = 22
+# jet.starting_jet: the previous step's booked outflow rise (m^3/s, <= 0), the rate before
+# pinch-off that the step crossing T* = F books its share at
+S_LAST_RISE = 23
+N_TAIL = 24
 
 # ---- stats returned by the force evaluation -------------------------------------------------
 T_EEL, T_PVISC, T_PDRAG, T_VOL, T_VDOT, T_P, T_PACT, T_FRING, T_RMAX, T_PCONT = (
@@ -905,16 +911,23 @@ def rank_one_coefficient(flags, st, P, dt, inertia):
 
 
 @njit(cache=True, nogil=True)
-def starting_jet_impulse(Nd, qn, vn, vs, Us, U, body, dt, alpha, q_end, g_end, v1, kappa, q0):
+def starting_jet_impulse(
+    Nd, qn, vn, vs, Us, U, body, dt, alpha, q_end, g_end, v1, kappa, q_peak, crossing, share,
+    last_rise,
+):
     """
-    jet.starting_jet: the step's exit over-pressure impulse per area ``j`` (Pa s, <= 0).
+    jet.starting_jet: the step's exit over-pressure impulse per area ``j`` (Pa s, <= 0), and more.
 
-    From the volume rates at the step's start ``q0`` and end (models/starting_jet.py); the
-    residual takes ``j grad V`` on the wall and ``A j`` on the vehicle's row (the thrust).
+    From the pulse's running peak outflow ``q_peak`` and the volume rate at the step's end; the
+    step that crosses pinch-off books ``share`` of the previous step's rise ``last_rise``
+    (models/starting_jet.py, step_overpressure_impulse).  The residual takes ``j grad V`` on the
+    wall and ``A j`` on the vehicle's row (the thrust).  Returns (j, the step's outflow rise
+    beyond the peak in m^3/s, Q_end in m^3/s).
     """
     u_end = U + (Us - U) / alpha if body else 0.0
     q1 = end_of_step_flow(Nd, qn, vn, vs, Us, u_end, dt, alpha, q_end, g_end, v1)
-    return sj.overpressure_impulse(kappa, q0, q1)
+    j = sj.step_overpressure_impulse(kappa, q_peak, q1, crossing, share, last_rise)
+    return j, sj.overpressure_impulse(1.0, q_peak, q1), q1
 
 
 @njit(cache=True, nogil=True)
@@ -1119,17 +1132,24 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
                     lam_start = inertance(qn, n1, g_lam)
             # jet.starting_jet: the forming ring's exit over-pressure (models/starting_jet.py)
             ring_kappa = 0.0
-            ring_q0 = 0.0
+            ring_peak = state[tail + S_PEAK_OUTFLOW]
+            ring_t0 = state[tail + S_FORMATION_TIME]  # T* at the step's start
             ring_area = 0.0
             ring_j = 0.0
+            ring_last_rise = state[tail + S_LAST_RISE]
+            ring_crossing = False  # pinch-off (T* = F) predicted within this step
+            ring_share = 1.0  # the share of the step before pinch-off
+            ring_rise = 0.0  # the step's outflow rise beyond the pulse's peak, m^3/s
+            ring_q1 = 0.0  # the converged step's end volume rate (while forming), m^3/s
             ring_pex = 0.0
-            if P[P_FORMATION_NUMBER] > 0.0 and sj.forming(
-                state[tail + S_FORMATION_TIME], P[P_FORMATION_NUMBER]
-            ):
+            if P[P_FORMATION_NUMBER] > 0.0 and sj.forming(ring_t0, P[P_FORMATION_NUMBER]):
                 ring_area = outlet_area(flags, qn, n1, P)
                 ring_kappa = sj.ring_inertance(P[P_RHO], ring_area)
                 volume_grad(qn, n1, g_end)
-                ring_q0 = flow_rate(Nd, g_end, vn, U if body else 0.0)
+                ring_crossing = sj.crosses_formation_number(
+                    ring_t0, flow_rate(Nd, g_end, vn, U if body else 0.0), ring_area, dt,
+                    P[P_FORMATION_NUMBER],
+                )
             fresh = False
             converged = False
             prev = 1e300
@@ -1200,9 +1220,14 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
                             if not fixed_dof(Nd, k) or (body and k == rz):
                                 R[k] -= dt * 0.5 * P[P_RHO] * q_mid * q_mid * g_lam[k]
                 if ring_kappa > 0.0:
-                    ring_j = starting_jet_impulse(
+                    # pinch-off within the step: its share before T* = F, from the midpoint's
+                    # volume rate (forces() above), as the formation time's own update
+                    ring_share = sj.pinch_off_share(
+                        ring_t0, st[T_VDOT], st[T_AOUT], dt, P[P_FORMATION_NUMBER]
+                    )
+                    ring_j, ring_rise, ring_q1 = starting_jet_impulse(
                         Nd, qn, vn, vs, Us, U, body, dt, alpha, q_end, g_end, v1, ring_kappa,
-                        ring_q0,
+                        ring_peak, ring_crossing, ring_share, ring_last_rise,
                     )
                     for k in range(n):
                         R[k] += ring_j * gf[k]
@@ -1231,7 +1256,9 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
                     band_solve(J, n, BW, wz, zz)
                 elif have_lu and (((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0):
                     # refresh the rank-one pressure correction for the reused factorisation
-                    ring_c = ring_kappa if ring_j < 0.0 else 0.0  # starting jet's inertia
+                    # the starting jet's inertia (none in the step crossing pinch-off: its
+                    # impulse there follows the previous step's rate, not the unknowns)
+                    ring_c = ring_kappa if ring_j < 0.0 and not ring_crossing else 0.0
                     pcoef = rank_one_coefficient(flags, st, P, dt, (rho_lam_now + ring_c) / alpha)
                     band_solve(J, n, BW, gf, zz)
                 if not have_lu:
@@ -1288,7 +1315,7 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
                         pcoef = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
                         band_solve(J, n, BW, wz, zz)
                     elif ((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0:
-                        ring_c = ring_kappa if ring_j < 0.0 else 0.0
+                        ring_c = ring_kappa if ring_j < 0.0 and not ring_crossing else 0.0
                         pcoef = rank_one_coefficient(
                             flags, st, P, dt, (rho_lam_now + ring_c) / alpha
                         )
@@ -1367,9 +1394,13 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
                 if ring_kappa > 0.0:
                     # the converged step's exit over-pressure: on the vehicle A p_ex, and its work
                     # A p_ex (u_j - U) out with the jet (the wall paid A p_ex u_j through grad V)
-                    ring_j = starting_jet_impulse(
+                    # (midpoint quantities: the ledger keeps the integrator's closure order)
+                    ring_share = sj.pinch_off_share(
+                        ring_t0, st[T_VDOT], st[T_AOUT], dt, P[P_FORMATION_NUMBER]
+                    )
+                    ring_j, ring_rise, ring_q1 = starting_jet_impulse(
                         Nd, qn, vn, vs, Us, U, body, dt, alpha, q_end, g_end, v1, ring_kappa,
-                        ring_q0,
+                        ring_peak, ring_crossing, ring_share, ring_last_rise,
                     )
                     ring_pex = -ring_j / dt
                     ring_out = ring_j * (st[T_VDOT] + ring_area * (Us if body else 0.0)) / dt
@@ -1415,6 +1446,11 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
             pres, vol, vdot = st[T_P], st[T_VOL], st[T_VDOT]
             if P[P_FORMATION_NUMBER] > 0.0:
                 pres += ring_pex
+                # the pulse's running peak (kept past pinch-off: ring_q1 = 0 there), reset with T*
+                state[tail + S_PEAK_OUTFLOW] = sj.next_peak_outflow(
+                    ring_peak, vdot, ring_q1, ring_rise
+                )
+                state[tail + S_LAST_RISE] = ring_rise
                 state[tail + S_FORMATION_TIME] = sj.next_formation_time(
                     state[tail + S_FORMATION_TIME], vdot, st[T_AOUT], dt
                 )
