@@ -456,10 +456,11 @@ def vehicle_forces(flags, u, b, w, q_p, q_n, a_n, volume, m_x, dmx_db, p):
     """
     Return the vehicle's mass and axial forces (kg, N, m^3/s; forward +).
 
-    (mass, thrust, drag, added-mass variation force, inflow, ram reference, ram applied). The mass carries the water inside (T_FLUID_MASS) and the added mass; the jet's momentum
-    thrust rho Q_n^2 / A_n while water leaves; the body's quadratic drag; -dm_x/db b' U; water
-    drawn in at rest must be brought to the vehicle's speed (the ram, rho Q_in U; eq. 1 has no
-    such term, the consistent coupling applies it).
+    (mass, thrust, drag, added-mass variation force, inflow, ram reference, ram applied). The
+    mass carries the water inside (T_FLUID_MASS) and the added mass; the jet's momentum thrust
+    rho Q_n^2 / A_n while water leaves; the body's quadratic drag; -dm_x/db b' U; water drawn in
+    at rest must be brought to the vehicle's speed (the ram, rho Q_in U; eq. 1 has no such term,
+    the consistent coupling applies it).
     """
     rho = p[P_RHO]
     m_vehicle = p[P_M_SOLID]
