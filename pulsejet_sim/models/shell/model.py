@@ -616,8 +616,10 @@ def _read_actuation(
     amp = 0.0
     timing = {'frequency_hz': 1.0, 'contraction_s': 0.3, 'release_s': 0.3, 'start_delay_s': 0.0,
               'pulse': 'half_cosine'}
+    # kind none is off: it leaves the other kinds' keys unread (a scene overrides the kind
+    # alone to switch actuation off), but a key no kind takes is still refused
+    keys.refuse_unknown(act, 'actuation', keys.ACTUATION_KIND_KEYS.get(akind, keys.ACTUATION_SPEC))
     if akind != 'none':
-        keys.refuse_unknown(act, 'actuation', keys.ACTUATION_KIND_KEYS[akind])
         source = keys.read(act, 'actuation', 'source', keys.ACTUATION_SPEC,
                            choices=('routine', 'command') if akind == 'cable' else ('routine',))
         actuation['source'] = source
