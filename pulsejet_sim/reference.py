@@ -7,7 +7,8 @@ Write the reference tables of the docs (docs/user/reference.md) from the code's 
 The tables are read from what the code declares as data, never copied: topic and service names,
 types and units (`pulsejet_sim.core.topics`), actuator limits (`Command.LIMITS`), the parameters of
 sim_node and controller_node (their `ParamSpec` tables) and the scene keys the models declare with
-`pulsejet_sim.core.schema` (Number, Choice, Flag). Needs no rclpy: the parameter tables import
+`pulsejet_sim.core.schema` (Number, Choice, Flag; the shell's in its scene_keys module, each with
+its meaning). Needs no rclpy: the parameter tables import
 without ROS. test/test_reference_docs.py fails when the stored file drifts from the code.
 """
 
@@ -167,12 +168,55 @@ def scene_section() -> list[str]:
     for kind, spec in ROUTINE_SPECS.items():
         out += [f'#### `kind: {kind}`', '']
         out += _table(header, [(f'`{k}`', *_rule_cells(r)) for k, r in spec.items()])
-    out += ['### Shell model (`model: shell`)', '']
+    out += shell_scene_section()
+    return out
+
+
+def _key_row(name: str, key) -> tuple[str, ...]:
+    """Return the row of a shell scene key (scene_keys.Key): its words replace derived values."""
+    default, allowed, unit = _rule_cells(key.rule)
+    if key.default:
+        default = key.default
+    return (f'`{name}`', default, key.allowed or allowed, unit, key.doc)
+
+
+def shell_scene_section() -> list[str]:
+    from pulsejet_sim.models.shell import scene_keys as keys
+
+    header = ('key', 'default', 'allowed', 'unit', 'meaning')
+
+    def table(spec) -> list[str]:
+        return _table(header, [_key_row(name, key) for name, key in spec.items()])
+
+    out = ['### Shell model (`model: shell`)', '']
     out.append(
-        "The shell model's keys are not declared as data yet (its scene loader checks each key "
-        'where it reads it), so they are not generated here; docs/user/scenes.md lists them.'
+        'A default or a bound in words is computed from other keys of the scene; a refusal '
+        'prints the value it takes there.'
     )
     out.append('')
+    out += ['#### Top level', '']
+    out += table(keys.TOP_SPEC)
+    sections = list(keys.SECTION_SPECS.items())
+    for section, spec in sections[:1]:
+        out += [f'#### `{section}:`', '']
+        out += table(spec)
+    out += ['#### `geometry:`', '']
+    out += table(keys.GEOMETRY_KIND_SPEC)
+    for kind, spec in keys.GEOMETRY_SPECS.items():
+        out += [f'`kind: {kind}`:', '']
+        out += table(spec)
+    out += ['`kind: points`:', '']
+    out += _table(header, [('`points`', 'required', 'a list', 'm', keys.GEOMETRY_POINTS_DOC)])
+    for section, spec in sections[1:]:
+        out += [f'#### `{section}:`', '']
+        if section == 'actuation':
+            out.append(
+                '; '.join(f'`kind: {kind}` takes {", ".join(f"`{k}`" for k in names)}'
+                          for kind, names in keys.ACTUATION_KIND_KEYS.items())
+                + '; `kind: none` uses none of them.'
+            )
+            out.append('')
+        out += table(spec)
     return out
 
 

@@ -8,11 +8,11 @@ a Command. The controller node and the offline runner drive the same objects.
 from __future__ import annotations
 
 from dataclasses import dataclass
-import math
 from typing import Any, Mapping
 
 from pulsejet_sim.core.model_io import Command, ModelError
 from pulsejet_sim.core.schema import check_section, Choice, Number
+from pulsejet_sim.models import cable_pulse
 
 PUMP_VALVE_SPEC = {
     'kind': Choice('pump_valve', ('pump_valve',)),
@@ -161,20 +161,15 @@ class CableRoutine:
         """Stateless: the pull is a function of time alone."""
 
     def activation(self, time_s: float) -> float:
-        t = time_s - self.start_delay_s
-        if t < 0.0:
-            return 0.0
-        period = 1.0 / self.frequency_hz
-        phase = t - period * math.floor(t / period)
-        if phase < self.contraction_s:
-            rise = phase / self.contraction_s
-            return rise if self.pulse == 'triangle' else 0.5 * (1.0 - math.cos(math.pi * rise))
-        if phase < self.contraction_s + self.release_s:
-            fall = (phase - self.contraction_s) / self.release_s
-            if self.pulse == 'triangle':
-                return 1.0 - fall
-            return 0.5 * (1.0 + math.cos(math.pi * fall))
-        return 0.0
+        """Return the pull's activation in [0, 1]: models/cable_pulse.py, as in the kernels."""
+        return cable_pulse.activation(
+            float(time_s),
+            float(self.start_delay_s),
+            float(self.frequency_hz),
+            float(self.contraction_s),
+            float(self.release_s),
+            self.pulse == 'triangle',
+        )[0]
 
     def command(self, time_s: float, volume_m3: float | None = None) -> Command:
         return Command(0.0, 1.0, self.amplitude_n * self.activation(time_s))

@@ -37,6 +37,25 @@ def test_tables_name_every_declared_topic_service_and_parameter():
     assert not missing, missing
 
 
+def test_the_shell_scene_keys_are_generated_from_their_declarations():
+    """Every declared shell key has its row, with the default, range and meaning it declares."""
+    from pulsejet_sim.models.shell import scene_keys as keys
+
+    text = reference.render()
+    shell = text[text.index('### Shell model (`model: shell`)'):]
+    specs = [keys.TOP_SPEC, keys.GEOMETRY_KIND_SPEC, *keys.GEOMETRY_SPECS.values(),
+             *keys.SECTION_SPECS.values()]
+    rows = [reference._key_row(name, key) for spec in specs for name, key in spec.items()]
+    assert len(rows) == sum(len(spec) for spec in specs) > 60
+    missing = [row[0] for row in rows if '| ' + ' | '.join(row) + ' |' not in shell]
+    assert not missing, missing
+    # a changed declaration changes the generated row: the stored file then drifts
+    assert '| `dt_s` | required | (0, 0.1] | s | the time step' in shell
+    assert "| `outlet_radius_m` | half the ring's radius (paper_code: 12.5 mm) |" in shell
+    for section in keys.SECTION_SPECS:
+        assert f'#### `{section}:`' in shell
+
+
 def test_check_runs_without_rclpy_and_fails_on_a_drifted_file(tmp_path):
     shim = tmp_path / 'shim'
     shim.mkdir()

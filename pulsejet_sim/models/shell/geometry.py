@@ -26,9 +26,8 @@ from typing import Any, Mapping
 
 import numpy as np
 from pulsejet_sim.core.model_io import ModelError
-from pulsejet_sim.core.schema import Number
+from pulsejet_sim.models.shell.scene_keys import GEOMETRY_KINDS, GEOMETRY_SPECS, read
 
-GEOMETRY_KINDS = ('ellipsoid', 'cone', 'cap_cylinder', 'points')
 _DENSE = 4001
 
 
@@ -96,18 +95,9 @@ class Profile:
         return behind / behind[-1], dz
 
 
-def _num(
-    section: Mapping[str, Any], key: str, where: str, low: float, high: float, default=None
-) -> float:
-    """Return a geometry number by the one schema rule (core.schema.Number), or ModelError."""
-    allowed = f'a number in [{low}, {high}]'
-    if key not in section:
-        if default is None:
-            raise ModelError(f'{where}.{key}: missing; allowed: {allowed}')
-        return float(default)
-    return Number(None, low, high).check(
-        f'{where}.{key}', section[key], from_text=True, allowed=allowed
-    )
+def _num(section: Mapping[str, Any], kind: str, key: str, default=None) -> float:
+    """Return a geometry number by its declaration (scene_keys.GEOMETRY_SPECS), or ModelError."""
+    return read(section, 'geometry', key, GEOMETRY_SPECS[kind], default=default)
 
 
 def _ellipsoid(g):
@@ -117,9 +107,9 @@ def _ellipsoid(g):
     ``r = b sin(phi)``, ``z = a cos(phi)`` with ``phi = 0`` at the front pole; the ring is on the
     rear half (``phi > pi/2``) where ``b sin(phi) = opening_radius_m``.
     """
-    a = _num(g, 'semi_axis_axial_m', 'geometry', 1e-3, 10.0)
-    b = _num(g, 'semi_axis_radial_m', 'geometry', 1e-3, 10.0)
-    ro = _num(g, 'opening_radius_m', 'geometry', 1e-4, 10.0)
+    a = _num(g, 'ellipsoid', 'semi_axis_axial_m')
+    b = _num(g, 'ellipsoid', 'semi_axis_radial_m')
+    ro = _num(g, 'ellipsoid', 'opening_radius_m')
     if ro >= b:
         raise ModelError(
             f'geometry.opening_radius_m: {ro!r} m is not below semi_axis_radial_m={b} m; '
@@ -137,9 +127,9 @@ def _cone(g):
     The apex is rounded by a spherical cap of radius ``tip_radius_m`` tangent to the cone (so the
     pole director is radial, theta = 0); ``tip_radius_m = 0`` keeps a sharp apex.
     """
-    L = _num(g, 'length_m', 'geometry', 1e-3, 10.0)
-    R = _num(g, 'base_radius_m', 'geometry', 1e-3, 10.0)
-    rt = _num(g, 'tip_radius_m', 'geometry', 0.0, 10.0, default=0.2 * R)
+    L = _num(g, 'cone', 'length_m')
+    R = _num(g, 'cone', 'base_radius_m')
+    rt = _num(g, 'cone', 'tip_radius_m', default=0.2 * R)
     beta = math.atan2(R, L)  # half-opening angle
     # tangent point of the tip sphere: the sphere centre on the axis at distance d from the apex
     # with d sin(beta) = rt; the cap spans polar angle 0 .. pi/2 - beta
@@ -176,9 +166,9 @@ def _cap_cylinder(g):
     angles 0..pi/4 of a 31 mm sphere (so the cylinder radius is 21.9 mm, with a kink of pi/4 at
     the junction); ``cylinder_length_m`` sets the mantle length.
     """
-    Rc = _num(g, 'cap_radius_m', 'geometry', 1e-3, 10.0)
-    al = _num(g, 'cap_opening_rad', 'geometry', 0.05, math.pi / 2)
-    Lc = _num(g, 'cylinder_length_m', 'geometry', 0.0, 10.0)
+    Rc = _num(g, 'cap_cylinder', 'cap_radius_m')
+    al = _num(g, 'cap_cylinder', 'cap_opening_rad')
+    Lc = _num(g, 'cap_cylinder', 'cylinder_length_m')
     n_cap = max(50, int(_DENSE * Rc * al / (Rc * al + Lc + 1e-12)))
     t = np.linspace(0.0, al, n_cap)
     h_cap = Rc * (1 - math.cos(al))

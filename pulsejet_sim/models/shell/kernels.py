@@ -46,6 +46,7 @@ import math
 from numba import literally, njit
 import numpy as np
 from pulsejet_sim.models import starting_jet as sj
+from pulsejet_sim.models.cable_pulse import activation as pulse_activation
 
 # ---- flags (bitmask; compiled out only by advance_specialised via numba.literally) -----------
 F_VISC = 1
@@ -177,28 +178,11 @@ def routine(t, P):
     """
     Return the activation a(t) in [0, 1] and da/dt of the periodic routine.
 
-    A rise over the contraction time, a fall over the release time, rest for the remaining period;
-    half cosines, or straight lines with P[P_PULSE] = PULSE_TRIANGLE.
+    models/cable_pulse.py's pull (the controller's CableRoutine evaluates the same function), with
+    the timing packed in P: P_DELAY, P_FREQ, P_TC, P_TR and P_PULSE = PULSE_TRIANGLE for lines.
     """
-    t = t - P[P_DELAY]
-    if t < 0.0:
-        return 0.0, 0.0
-    per = 1.0 / P[P_FREQ]
-    ph = t - per * math.floor(t / per)
-    tc = P[P_TC]
-    tr = P[P_TR]
     triangle = P[P_PULSE] == PULSE_TRIANGLE
-    if ph < tc:
-        if triangle:
-            return ph / tc, 1.0 / tc
-        x = math.pi * ph / tc
-        return 0.5 * (1.0 - math.cos(x)), 0.5 * math.pi / tc * math.sin(x)
-    if ph < tc + tr:
-        if triangle:
-            return 1.0 - (ph - tc) / tr, -1.0 / tr
-        x = math.pi * (ph - tc) / tr
-        return 0.5 * (1.0 + math.cos(x)), -0.5 * math.pi / tr * math.sin(x)
-    return 0.0, 0.0
+    return pulse_activation(t, P[P_DELAY], P[P_FREQ], P[P_TC], P[P_TR], triangle)
 
 
 @njit(cache=True, nogil=True)

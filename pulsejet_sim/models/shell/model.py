@@ -109,51 +109,10 @@ the shell: it takes the slot of the clamped ring's axial dof, and by translation
 vehicle update was unstable with stiff viscous walls).  A step whose Newton solve fails is
 retried as 4, 16, 64 sub-steps before SimulationBlowUp is raised.
 
-Scene schema (``model: shell``; see config/shell_robot.yaml, every key validated)::
-
-    coupling:   consistent | paper | paper_code
-    simulation: {dt_s, duration_s, integrator: implicit_midpoint|backward_euler|verlet,
-                 newton_tolerance: 1e-9 (in [1e-14, 1e-4]; relative to the shortest element
-                 per step), specialise_kernel: false,
-                 keep_newton_workspace: false (true: the factorised Newton matrix and the
-                 predictor's history carry over from one advance() call to the next that
-                 continues it, as within one call; like newton_tolerance, no effect on
-                 verlet, which has no Newton solve)}
-    geometry:   {kind: ellipsoid, semi_axis_axial_m, semi_axis_radial_m, opening_radius_m}
-              | {kind: cone, length_m, base_radius_m, tip_radius_m (0.2 base)}
-              | {kind: cap_cylinder, cap_radius_m, cap_opening_rad, cylinder_length_m}
-              | {kind: points, points: [[r, z], ...] from the pole (r = 0) to the ring}
-    mesh:       {elements: 4..400}
-    material:   {youngs_modulus_pa, viscosity_pa_s, poisson_ratio, half_thickness_m, density_kg_m3,
-                 shear_correction: 1, rotary_inertia_scale: 1}
-    fluid:      {density_kg_m3, added_mass_coefficient: 1.1, added_mass_length_m: max(r0)/2,
-                 tangential_drag_coefficient: 0.05, drag_coefficient: 1.0,
-                 internal_inertia: none|one_dimensional|one_dimensional_deforming (the water
-                 inside carries 1/2 rho Lambda V'^2, paper 001's 1-D internal flow, Lambda of
-                 the reference or of the current shape; outlet edge only),
-                 internal_flow_momentum: false (true: that flow's momentum rho S V' too)}
-    jet:        {outlet: ring|edge|free_edge_fixed_nozzle, outlet_radius_m: ring/2 (not with edge),
-                 inlet_area_m2: A_out + 3 pi (10 mm)^2,
-                 thrust_coefficient: 1,
-                 starting_jet: false (true: the forming vortex ring's exit over-pressure,
-                 models/starting_jet.py, docs/theory/starting_jet.md; consistent coupling and an
-                 implicit integrator only), formation_number: 4 (pinch-off's stroke ratio L/D)}
-    vehicle:    {mass_kg (shell + payload), added_mass_kg: 0, initial_velocity_m_s: 0}
-    actuation:  {kind: none|cable|muscle, source: routine|command (cable only),
-                 amplitude (cable: peak total radial pull, N; muscle: fractional drop of the
-                 desired hoop radius, 0..0.95), distribution: uniform|rising|falling (cable),
-                 taper_fraction: 0.15, desired_radius: proportional|constant_depth|
-                 constant_depth_to_edge (muscle),
-                 frequency_hz, contraction_s, release_s, start_delay_s,
-                 pulse: half_cosine|triangle (the rise and fall's shape),
-                 max_cable_force_n (cable): the cable actuator's rating, N; a command above it is
-                 refused (CommandError). Default twice the amplitude when the scene gives one: the
-                 wall has no contact model, so a pull that folds the mantle onto itself (about
-                 3x the robot's 8 N) stops the physics; the rating keeps commands below that, and
-                 test/test_shell_extremes.py holds every shipped cable scene at it}
-    terms:      {viscosity, drag, added_mass, jet, vehicle_motion: all true}
-    load:       {internal_pressure_pa: 0}   (static pressure load, for tests)
-    initial:    {radial_perturbation_m: 0}  (r += d sin(pi X/L) at t = 0)
+Scene keys (``model: shell``; see config/shell_robot.yaml): every key of every section is declared
+once, with its rule, unit, range, default and meaning, in ``shell/scene_keys.py``; the tables of
+docs/user/reference.md are generated from there. ``from_scene`` reads the scene section by section
+(``_read_*`` below), each reader returning its part of the parameter vector P.
 
 The cable routine: activation ``a(t)`` rises as a half cosine (``pulse: triangle``: a straight
 line) over ``contraction_s``, falls over ``release_s`` and rests for the rest of the period; the
@@ -185,44 +144,17 @@ from typing import Any, Mapping
 
 import numpy as np
 from pulsejet_sim.core.model_io import Command, ModelError, Observation, SimulationBlowUp
-from pulsejet_sim.core.schema import show
 from pulsejet_sim.models.shell import kernels as sk
-from pulsejet_sim.models.shell.geometry import build_profile, GEOMETRY_KINDS, Profile
-from pulsejet_sim.models.starting_jet import FORMATION_NUMBER, FORMATION_NUMBER_RANGE
+from pulsejet_sim.models.shell import scene_keys as keys
+from pulsejet_sim.models.shell.geometry import build_profile, Profile
 
 _KERNELS: dict = {}
 INTEGRATORS = {'verlet': (0, 1.0), 'implicit_midpoint': (1, 0.5), 'backward_euler': (1, 1.0)}
-SECTIONS = (
-    'model',
-    'name',
-    'description',
-    'coupling',
-    'simulation',
-    'geometry',
-    'mesh',
-    'material',
-    'fluid',
-    'vehicle',
-    'jet',
-    'actuation',
-    'terms',
-    'initial',
-    'load',
-)
-TERMS = {'viscosity': True, 'drag': True, 'added_mass': True, 'jet': True, 'vehicle_motion': True}
-ACTUATION_KINDS = ('none', 'cable', 'muscle')
-DISTRIBUTIONS = ('uniform', 'rising', 'falling')
-COUPLINGS = ('consistent', 'paper', 'paper_code')
-OUTLETS = ('ring', 'edge', 'free_edge_fixed_nozzle')
-DESIRED_RADIUS = ('proportional', 'constant_depth', 'constant_depth_to_edge')
-#: the water inside: no inertia of its own (paper 000's loads), or paper 001's one-dimensional
-#: internal flow carried over to the shell
-INTERNAL_INERTIA = ('none', 'one_dimensional', 'one_dimensional_deforming')
+TERMS = {name: key.rule.default for name, key in keys.TERMS_SPEC.items()}
 #: the reference profile is resampled this finely for the internal inertance, so that it does
 #: not change with the mesh
 DENSE_ELEMENTS = 4000
-#: the routine's rise and fall: half cosines, or straight lines (the authors' code's
-#: `triangularPulse`, paper 000's study)
+#: the routine's rise and fall (scene_keys.PULSE_NAMES) as the kernels code them
 PULSE_SHAPES = {'half_cosine': sk.PULSE_HALF_COSINE, 'triangle': sk.PULSE_TRIANGLE}
 ERR_TEXT = {
     sk.ERR_NONFINITE: 'non-finite state (NaN/inf)',
@@ -235,65 +167,8 @@ ERR_TEXT = {
     'the one-dimensional internal flow of fluid.internal_inertia: one_dimensional_deforming is '
     'undefined there; use internal_inertia: one_dimensional or none',
 }
-
-
-def _section(scene, key, required=True):
-    sec = scene.get(key)
-    if sec is None:
-        if required:
-            raise ModelError(
-                f'{key}: missing section; allowed: a mapping (see config/shell_robot.yaml)'
-            )
-        return {}
-    if not isinstance(sec, Mapping):
-        raise ModelError(f'{key}: {show(sec)} is not a mapping; allowed: a mapping of parameters')
-    return sec
-
-
-def _num(sec, key, where, low, high, default=None, low_open=False):
-    if key not in sec:
-        if default is None:
-            raise ModelError(
-                f'{where}.{key}: missing; allowed: a number in '
-                f'{"(" if low_open else "["}{low}, {high}]'
-            )
-        return float(default)
-    value = sec[key]
-    if isinstance(value, bool):
-        raise ModelError(
-            f'{where}.{key}: {show(value)} is not a number; allowed: a number in [{low}, {high}]'
-        )
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ModelError(
-            f'{where}.{key}: {show(value)} is not a number; allowed: a number in [{low}, {high}]'
-        ) from None
-    if not math.isfinite(v) or v < low or v > high or (low_open and v == low):
-        raise ModelError(
-            f'{where}.{key}: {show(value)} is out of range; allowed: a number in '
-            f'{"(" if low_open else "["}{low}, {high}]'
-        )
-    return v
-
-
-def _choice(sec, key, where, allowed, default):
-    value = sec.get(key, default)
-    if value not in allowed:
-        raise ModelError(
-            f'{where}.{key}: {show(value)} is not known; '
-            f'allowed: one of {", ".join(map(str, allowed))}'
-        )
-    return value
-
-
-def _unknown(sec, where, allowed):
-    for k in sec:
-        if k not in allowed:
-            raise ModelError(
-                f'{where}.{show(k) if not isinstance(k, str) else k[:60]}: unknown key '
-                f'(value {show(sec[k])}); allowed: {", ".join(allowed)}'
-            )
+#: entries of the parameter vector P (kernels' P_* slots) that one section of the scene fills
+Part = dict[int, float]
 
 
 def starting_jet_setting(jet, coupling, integrator, jet_on):
@@ -305,10 +180,7 @@ def starting_jet_setting(jet, coupling, integrator, jet_on):
     paid by the cavity wall and enters the implicit solve as an inertia, so the term needs the
     consistent coupling and an implicit integrator.
     """
-    on = jet.get('starting_jet', False)
-    if not isinstance(on, bool):
-        raise ModelError(f'jet.starting_jet: {on!r} is not a boolean; allowed: true or false')
-    if not on:
+    if not keys.read(jet, 'jet', 'starting_jet', keys.JET_SPEC):
         if 'formation_number' in jet:
             raise ModelError(
                 f'jet.formation_number: {jet["formation_number"]!r} is not used without '
@@ -322,8 +194,479 @@ def starting_jet_setting(jet, coupling, integrator, jet_on):
             'cavity wall pays the over-pressure), an implicit integrator (the forming ring is an '
             'inertia) and the jet on (or starting_jet: false)'
         )
-    low, high = FORMATION_NUMBER_RANGE
-    return _num(jet, 'formation_number', 'jet', low, high, default=FORMATION_NUMBER)
+    return keys.read(jet, 'jet', 'formation_number', keys.JET_SPEC)
+
+
+def _read_coupling(scene: Any) -> str:
+    """Check the scene's top level (its sections, its model) and return its coupling."""
+    if not isinstance(scene, Mapping):
+        raise ModelError(f'scene: {scene!r} is not a mapping')
+    for k in scene:
+        if k not in keys.SECTIONS:
+            raise ModelError(
+                f'{k}: unknown section for the shell model (value {scene[k]!r}); allowed: '
+                f'{", ".join(keys.SECTIONS)}'
+            )
+    if scene.get('model', 'shell') != 'shell':
+        raise ModelError(
+            f'model: {scene.get("model")!r} is not the shell model; allowed: shell'
+        )
+    return keys.read(scene, '', 'coupling', keys.TOP_SPEC)
+
+
+def _read_integrator(scene: Mapping[str, Any], coupling: str) -> tuple[dict, Part]:
+    """Return the ``simulation`` section's time step, integrator and Newton solve settings."""
+    sim = keys.section(scene, 'simulation')
+    keys.refuse_unknown(sim, 'simulation', keys.SIMULATION_SPEC)
+
+    def value(name):
+        return keys.read(sim, 'simulation', name, keys.SIMULATION_SPEC)
+
+    out = {'dt_s': value('dt_s'), 'integrator': value('integrator')}
+    if coupling in ('paper', 'paper_code') and out['integrator'] == 'verlet':
+        raise ModelError(
+            f"simulation.integrator: 'verlet' is not available with coupling: {coupling}; "
+            'allowed: implicit_midpoint or backward_euler'
+        )
+    for name in ('duration_s', 'newton_tolerance', 'specialise_kernel', 'keep_newton_workspace'):
+        out[name] = value(name)
+    if out['keep_newton_workspace'] and out['specialise_kernel']:
+        raise ModelError(
+            'simulation.keep_newton_workspace: true is not available with '
+            'specialise_kernel: true (the kept workspace runs the generic kernel); '
+            'allowed: specialise_kernel: false, or keep_newton_workspace: false'
+        )
+    part = {
+        sk.P_DT: out['dt_s'],
+        sk.P_ALPHA: INTEGRATORS[out['integrator']][1],
+        sk.P_TOL: out['newton_tolerance'],
+        sk.P_MAXIT: 30,
+    }
+    return out, part
+
+
+def _read_geometry_and_mesh(scene: Mapping[str, Any]) -> tuple[Mapping, Profile, Part]:
+    """Return the ``geometry`` mapping and its reference profile on the ``mesh``'s elements."""
+    mesh = keys.section(scene, 'mesh')
+    keys.refuse_unknown(mesh, 'mesh', keys.MESH_SPEC)
+    elements = keys.read(mesh, 'mesh', 'elements', keys.MESH_SPEC)
+    geo = keys.section(scene, 'geometry')
+    # before build_profile: a list is unhashable there
+    keys.read(geo, 'geometry', 'kind', keys.GEOMETRY_KIND_SPEC)
+    profile = build_profile(geo, elements)
+    rmax0 = float(profile.r0.max())
+    part = {
+        sk.P_V0: profile.volume_m3(),
+        sk.P_QLIM: 20.0 * max(profile.length_m, rmax0),
+        sk.P_VLIM: 1000.0,
+    }
+    return geo, profile, part
+
+
+def _read_material(scene: Mapping[str, Any], rmax0: float) -> tuple[dict, Part]:
+    """Return the wall's ``material`` (Kelvin-Voigt) and its stiffness, viscosity and contact."""
+    mat = keys.section(scene, 'material')
+    keys.refuse_unknown(mat, 'material', keys.MATERIAL_SPEC)
+    m = {name: keys.read(mat, 'material', name, keys.MATERIAL_SPEC) for name in keys.MATERIAL_SPEC}
+    Ey, eta_v, nu, h = (
+        m['youngs_modulus_pa'], m['viscosity_pa_s'], m['poisson_ratio'], m['half_thickness_m']
+    )
+    kappa = m['shear_correction']
+    if h > 0.25 * rmax0:
+        raise ModelError(
+            f'material.half_thickness_m: {h!r} m is not thin against the mantle radius '
+            f'{rmax0:.4g} m; '
+            f'allowed: half_thickness_m <= {0.25 * rmax0:.4g} m'
+        )
+    G = Ey / (2 * (1 + nu))
+    part = {
+        sk.P_PSI: 2 * Ey * h / (1 - nu**2),
+        sk.P_PSI2: 6 * eta_v * h / (1 - nu**2),
+        sk.P_JS: h * h / 3,
+        sk.P_GS: 2 * h * G * kappa,
+        sk.P_GV: 2 * h * eta_v * kappa,
+        sk.P_NU: nu,
+        sk.P_RLIM: 0.25 * h,
+        # axis contact: inner faces meet when the midsurface is one half-thickness from the axis;
+        # penalty modulus E over that gap (through-thickness compression of the wall)
+        sk.P_HC: h,
+        sk.P_KC: Ey / h,
+    }
+    return m, part
+
+
+def _read_terms(scene: Mapping[str, Any]) -> dict:
+    """Return which physical ``terms`` are on (all by default)."""
+    given = keys.section(scene, 'terms', required=False)
+    keys.refuse_unknown(given, 'terms', keys.TERMS_SPEC)
+    terms = dict(TERMS)
+    for k in given:
+        terms[k] = keys.read(given, 'terms', k, keys.TERMS_SPEC)
+    return terms
+
+
+def _read_fluid_loads(scene: Mapping[str, Any], rmax0: float) -> tuple[dict, Part]:
+    """Return the outer water's ``fluid`` loads: density, added mass, drag; the water inside."""
+    fl = keys.section(scene, 'fluid')
+    keys.refuse_unknown(fl, 'fluid', keys.FLUID_SPEC)
+    out = {}
+    for name in keys.FLUID_SPEC:
+        derived = 0.5 * rmax0 if name == 'added_mass_length_m' else None
+        out[name] = keys.read(fl, 'fluid', name, keys.FLUID_SPEC, default=derived)
+    if out['internal_flow_momentum'] and out['internal_inertia'] != 'one_dimensional':
+        # the momentum is the reference cavity's 1-D flow's (its S, like its Lambda, is that
+        # cavity's): it needs that flow
+        raise ModelError(
+            f'fluid.internal_flow_momentum: true needs internal_inertia: one_dimensional '
+            f'(the scene has {out["internal_inertia"]!r}); allowed: internal_flow_momentum: '
+            'false, or internal_inertia: one_dimensional'
+        )
+    part = {
+        sk.P_RHO: out['density_kg_m3'],
+        sk.P_CT: out['tangential_drag_coefficient'],
+        sk.P_CD: out['drag_coefficient'],
+    }
+    return out, part
+
+
+def _read_jet_outlet(
+    scene: Mapping[str, Any], coupling: str, terms: dict, ring_radius_m: float
+) -> tuple[Mapping, dict, Part]:
+    """Return the ``jet``'s outlet, its area and the inlet's, and the thrust coefficient."""
+    jet = keys.section(scene, 'jet', required=terms['jet'])
+    keys.refuse_unknown(jet, 'jet', keys.JET_SPEC)
+    code = coupling == 'paper_code'
+    outlet = keys.read(
+        jet, 'jet', 'outlet', keys.JET_SPEC,
+        default='free_edge_fixed_nozzle' if code else 'edge' if coupling == 'paper' else 'ring',
+    )
+    rring = ring_radius_m
+    if code and outlet != 'free_edge_fixed_nozzle':
+        raise ModelError(
+            f"jet.outlet: {outlet!r} is not available with coupling: paper_code (the authors' "
+            'code: free open end, fixed nozzle Area_out = pi*Rn.^2); '
+            'allowed: free_edge_fixed_nozzle'
+        )
+    if outlet == 'edge':
+        if 'outlet_radius_m' in jet:
+            raise ModelError(
+                f'jet.outlet_radius_m: {jet["outlet_radius_m"]!r} is not used with outlet: '
+                f'edge (the outlet is the mantle edge, radius {rring:.4g} m at rest); '
+                'allowed: leave it out, or outlet: ring'
+            )
+        r_out = rring
+    else:
+        r_out = keys.read(
+            jet, 'jet', 'outlet_radius_m', keys.JET_SPEC, high=rring,
+            default=min(0.0125, rring) if code else 0.5 * rring,
+        )
+    A_out = math.pi * r_out**2
+    A_in = keys.read(
+        jet, 'jet', 'inlet_area_m2', keys.JET_SPEC, default=A_out + 3 * math.pi * 0.01**2
+    )
+    Cf = keys.read(jet, 'jet', 'thrust_coefficient', keys.JET_SPEC)
+    out = {'outlet': outlet, 'free_edge': outlet in ('edge', 'free_edge_fixed_nozzle')}
+    return jet, out, {sk.P_AOUT: A_out, sk.P_AIN: A_in, sk.P_CF: Cf}
+
+
+def _read_water_inside(
+    geo: Mapping, fluid: dict, coupling: str, outlet: str, integrator: str, jet_on: bool
+) -> Part:
+    """Return the inertance (and momentum length) of ``fluid.internal_inertia``'s 1-D flow."""
+    internal_inertia = fluid['internal_inertia']
+    inertance = 0.0
+    momentum_length = 0.0
+    if internal_inertia != 'none':
+        # the 1-D flow of the water inside (docs/theory/shell.md) ends at the
+        # cavity's own open section, so the jet must leave through the free edge; a smaller
+        # nozzle would add a contraction whose inertance this reading does not give
+        if outlet != 'edge' or coupling == 'paper_code' or integrator == 'verlet' or not jet_on:
+            raise ModelError(
+                f'fluid.internal_inertia: {internal_inertia!r} is not available with '
+                f'coupling: {coupling}, jet.outlet: {outlet}, integrator: {integrator}, '
+                f'terms.jet: {str(jet_on).lower()}; allowed: coupling paper or '
+                'consistent, jet.outlet: edge, an implicit integrator and the jet on '
+                '(or internal_inertia: none)'
+            )
+        dense = build_profile(geo, DENSE_ELEMENTS)
+        inertance = dense.internal_inertance_per_m()
+        if fluid['internal_flow_momentum']:
+            momentum_length = dense.internal_momentum_length_m()
+    return {
+        sk.P_LAMBDA: inertance,
+        sk.P_LAMBDA_DEFORMING: float(internal_inertia == 'one_dimensional_deforming'),
+        sk.P_SMOM: momentum_length,
+    }
+
+
+def _read_static_load_and_initial_shape(
+    scene: Mapping[str, Any], rmax0: float
+) -> tuple[float, Part]:
+    """Return the ``initial`` radial perturbation, m, and the ``load`` section's pressure."""
+    load = keys.section(scene, 'load', required=False)
+    keys.refuse_unknown(load, 'load', keys.LOAD_SPEC)
+    pstat = keys.read(load, 'load', 'internal_pressure_pa', keys.LOAD_SPEC)
+    init = keys.section(scene, 'initial', required=False)
+    keys.refuse_unknown(init, 'initial', keys.INITIAL_SPEC)
+    pert = keys.read(
+        init, 'initial', 'radial_perturbation_m', keys.INITIAL_SPEC,
+        low=-0.5 * rmax0, high=0.5 * rmax0,
+    )
+    return pert, {sk.P_PSTAT: pstat}
+
+
+def _element_table(profile: Profile) -> np.ndarray:
+    """Return the elements' discrete reference values E (see shell/kernels.py)."""
+    X, r0, z0, th0 = profile.X, profile.r0, profile.z0, profile.theta0
+    dr, dz = np.diff(r0), np.diff(z0)
+    ds = np.hypot(dr, dz)
+    thm = 0.5 * (th0[:-1] + th0[1:])
+    r0m = 0.5 * (r0[:-1] + r0[1:])
+    lam0 = (dr * np.cos(thm) + dz * np.sin(thm)) / ds
+    eta0 = (-dr * np.sin(thm) + dz * np.cos(thm)) / ds
+    mu0 = np.diff(th0) / ds
+    E = np.zeros((X.size - 1, sk.N_ECOLS))
+    E[:, sk.E_DS] = ds
+    E[:, sk.E_R0M] = r0m
+    E[:, sk.E_LAM0] = lam0
+    E[:, sk.E_ETA0] = eta0
+    E[:, sk.E_K0] = mu0 * lam0
+    E[:, sk.E_VS0] = np.sin(thm) / r0m
+    E[:, sk.E_AREA] = 2 * math.pi * r0m * ds
+    return E
+
+
+def _node_masses(
+    profile: Profile, E: np.ndarray, material: dict, fluid: dict, added_mass_on: bool, code: bool
+) -> dict:
+    """Return the node table Nd with the nodes' masses, added masses and areas filled in."""
+    r0, th0 = profile.r0, profile.theta0
+    n1 = E.shape[0] + 1
+    h = material['half_thickness_m']
+    area = np.zeros(n1)
+    area[:-1] += 0.5 * E[:, sk.E_AREA]
+    area[1:] += 0.5 * E[:, sk.E_AREA]
+    m = material['density_kg_m3'] * 2 * h * area
+    Ca, rho, la = (
+        fluid['added_mass_coefficient'], fluid['density_kg_m3'], fluid['added_mass_length_m']
+    )
+    ma = Ca * rho * la * area if added_mass_on else np.zeros(n1)
+    n0 = np.stack([-np.sin(th0), np.cos(th0)], axis=1)
+    Nd = np.zeros((n1, sk.N_NCOLS))
+    Nd[:, sk.N_MRR] = m + ma * n0[:, 0] ** 2
+    Nd[:, sk.N_MRZ] = ma * n0[:, 0] * n0[:, 1]
+    Nd[:, sk.N_MZZ] = m + ma * n0[:, 1] ** 2
+    if code:
+        # the authors' code: C_a times the shell's own mass, in every translation
+        # (octopus_driver.m: Gammas_ag = Gammas+ro_shel*B*diag([0 0 0 2*h 2*h 2*h]), B = 1.1)
+        ma = Ca * m if added_mass_on else np.zeros(n1)
+        Nd[:, sk.N_MRR] = m + ma
+        Nd[:, sk.N_MRZ] = 0.0
+        Nd[:, sk.N_MZZ] = m + ma
+    Nd[:, sk.N_MTT] = material['rotary_inertia_scale'] * m * h * h / 3.0
+    Nd[:, sk.N_DAREA] = area
+    # axis contact radius: one half-thickness (inner faces meet), but never more than half the
+    # node's reference radius (nodes next to the pole sit within a thickness of the axis)
+    Nd[:, sk.N_HC] = np.minimum(h, 0.5 * r0)
+    return {'Nd': Nd, 'node_mass': m, 'node_added_mass': ma, 'n0': n0}
+
+
+def _node_supports(profile: Profile, E: np.ndarray, nodes: dict, code: bool, free_edge: bool):
+    """
+    Hold the pole and the ring (or the edge free, or paper_code's rim clamped) in nodes['Nd'].
+
+    Adds the free nodes, the moving shell's mass and paper_code's rim node to `nodes`.
+    """
+    Nd, m, th0 = nodes['Nd'], nodes['node_mass'], profile.theta0
+    ne = E.shape[0]
+    Nd[0, sk.N_FIXR] = 1.0
+    Nd[0, sk.N_FIXT] = 1.0
+    Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXZ] = Nd[-1, sk.N_FIXT] = 1.0
+    free = np.ones(ne + 1, bool)
+    free[0] = free[-1] = False
+    if free_edge:
+        # our reading of paper 000 section 5.1 ("a shrinkage of the nozzle area"): the edge
+        # carries no prescribed radius or angle (zero wrench), only its axial place on the body
+        Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXT] = 0.0
+        # its axial place is the body's: no r-z coupling of the added mass at that node (the
+        # residual would otherwise pull the vehicle speed held in the ring's axial slot into r)
+        Nd[-1, sk.N_MRZ] = 0.0
+        free[-1] = True
+    shell_free_mass = float(m[:-1].sum())
+    code_rim = 0
+    if code:
+        # the authors' code (octopus_driver.m, octopus_derivatives.m): the body holds X = 0, a
+        # hole whose wall is at alpha0 = pi/4 (sigmas_o = zeros(6,1)); the open end X = L
+        # carries no wrench ("condizioni su X=L"). Here the polar cap up to the first node
+        # whose wall is at pi/4 from the pole's is rigid, part of the body, its rim clamped;
+        # the edge is free in r, z and theta
+        code_rim = int(np.argmax(np.abs(th0 - th0[0]) >= math.pi / 4 - 1e-12))
+        if code_rim <= 0 or code_rim >= ne - 1:
+            raise ModelError(
+                'coupling: paper_code needs a mantle whose wall turns by pi/4 from the pole '
+                "before the edge (the clamped rim of the authors' code); "
+                'this geometry does not'
+            )
+        Nd[:code_rim + 1, sk.N_FIXR] = Nd[:code_rim + 1, sk.N_FIXZ] = \
+            Nd[:code_rim + 1, sk.N_FIXT] = 1.0
+        Nd[-1, sk.N_FIXZ] = 0.0
+        free[: code_rim + 1] = False
+        shell_free_mass = float(m[code_rim + 1:].sum())
+        # the wall-borne load per reference area, on the wall from the rim on only (the
+        # rim's share of the cap's element is not wall): its work-equivalent nodal shares
+        Nd[:, sk.N_WWALL] = consistent_area_shares(profile.r0, E[:, sk.E_DS], code_rim)
+    nodes.update(free=free, shell_free_mass=shell_free_mass, code_rim=code_rim)
+
+
+def _read_vehicle(scene: Mapping[str, Any], shell_free_mass: float) -> tuple[dict, Part]:
+    """Return the ``vehicle``: its payload, added mass and initial velocity."""
+    veh = keys.section(scene, 'vehicle', required=False)
+    keys.refuse_unknown(veh, 'vehicle', keys.VEHICLE_SPEC)
+    total = keys.read(veh, 'vehicle', 'mass_kg', keys.VEHICLE_SPEC, default=2.0 * shell_free_mass)
+    if total <= shell_free_mass:
+        raise ModelError(
+            f'vehicle.mass_kg: {total!r} kg is not more than the moving shell mass '
+            f'{shell_free_mass:.4g} kg; allowed: mass_kg > {shell_free_mass:.4g} '
+            '(shell plus payload)'
+        )
+    mx = keys.read(veh, 'vehicle', 'added_mass_kg', keys.VEHICLE_SPEC)
+    out = {
+        'payload_kg': total - shell_free_mass,
+        'body_added_mass_kg': mx,
+        'initial_velocity_m_s': keys.read(veh, 'vehicle', 'initial_velocity_m_s',
+                                          keys.VEHICLE_SPEC),
+    }
+    return out, {sk.P_MBODY: out['payload_kg'] + mx, sk.P_MSHELL: shell_free_mass}
+
+
+def _read_cable(act: Mapping[str, Any], source: str, X: np.ndarray, free: np.ndarray,
+                code_rim: int, Nd: np.ndarray) -> dict:
+    """Read the cable's distribution, amplitude and rating; fill the nodes' pull shares."""
+    dist = keys.read(act, 'actuation', 'distribution', keys.ACTUATION_SPEC)
+    xi = X / X[-1]
+    shape = {'uniform': np.ones(X.size), 'rising': xi, 'falling': 1.0 - xi}[dist]
+    # the pull is a line load along the deformable meridian (from the pole, or from
+    # paper_code's clamped rim) of total ``amplitude``; each node takes its
+    # work-equivalent share and the held ends' shares go to the supports, so the
+    # discrete load converges to the continuous one at the element's own order
+    w = consistent_line_load(X, shape, code_rim) * free
+    if w.sum() <= 0:
+        raise ModelError(
+            f'actuation.distribution: {dist!r} loads no free node; allowed: uniform'
+        )
+    Nd[:, sk.N_WC] = w
+    amp = 0.0
+    if source == 'routine' or 'amplitude' in act:  # a command-driven scene keeps its routine's
+        amp = keys.read(act, 'actuation', 'amplitude', keys.ACTUATION_SPEC, unit='N')
+    # the rating: twice the amplitude when the scene gives one. The wall has no contact model,
+    # so a pull that folds the mantle onto itself (about 3x the robot's 8 N) stops the physics;
+    # the rating keeps commands below that (test/test_shell_extremes.py holds every shipped cable
+    # scene at it)
+    rating = keys.read(
+        act, 'actuation', 'max_cable_force_n', keys.ACTUATION_SPEC,
+        default=2.0 * amp if amp > 0 else keys.CABLE_FORCE_HIGH_N,
+    )
+    return {'amplitude': amp, 'distribution': dist, 'max_cable_force_n': rating}
+
+
+def _read_muscle(act: Mapping[str, Any], profile: Profile, E: np.ndarray) -> dict:
+    """Read the muscle's amplitude and desired radius; fill the elements' desired-stretch drop."""
+    amp = keys.read(act, 'actuation', 'amplitude', keys.ACTUATION_SPEC, high=0.95)
+    taper = keys.read(act, 'actuation', 'taper_fraction', keys.ACTUATION_SPEC)
+    desired = keys.read(act, 'actuation', 'desired_radius', keys.ACTUATION_SPEC)
+    X = profile.X
+    Xm = 0.5 * (X[:-1] + X[1:]) / X[-1]
+    E[:, sk.E_SMUS] = muscle_shape(desired, Xm, E[:, sk.E_R0M], taper, amp)
+    return {'amplitude': amp, 'taper_fraction': taper, 'desired_radius': desired}
+
+
+def _read_routine(act: Mapping[str, Any]) -> dict:
+    """Read the actuation routine's timing: frequency, rise, fall, delay and pulse shape."""
+    def value(name, **narrow):
+        return keys.read(act, 'actuation', name, keys.ACTUATION_SPEC, **narrow)
+
+    freq = value('frequency_hz')
+    per = 1.0 / freq
+    tc = value('contraction_s', high=per)
+    tr = value('release_s', high=per)
+    if tc + tr > per * (1 + 1e-12):
+        raise ModelError(
+            'actuation.release_s: contraction_s + release_s = '
+            f'{tc + tr:.4g} s exceeds the period 1/frequency_hz = {per:.4g} s; '
+            'allowed: contraction_s + release_s <= period'
+        )
+    return {
+        'frequency_hz': freq, 'contraction_s': tc, 'release_s': tr,
+        'start_delay_s': value('start_delay_s'), 'pulse': value('pulse'),
+    }
+
+
+def _read_actuation(
+    scene: Mapping[str, Any], profile: Profile, E: np.ndarray, nodes: dict
+) -> tuple[dict, int, Part]:
+    """
+    Return the ``actuation`` (cable or muscle actuation), its kernel flags and its parameters.
+
+    Fills the nodes' cable shares or the elements' desired-stretch drop.
+    """
+    act = keys.section(scene, 'actuation', required=False)
+    akind = keys.read(act, 'actuation', 'kind', keys.ACTUATION_SPEC)
+    actuation = {'kind': akind, 'source': 'none'}
+    flags = 0
+    amp = 0.0
+    timing = {'frequency_hz': 1.0, 'contraction_s': 0.3, 'release_s': 0.3, 'start_delay_s': 0.0,
+              'pulse': 'half_cosine'}
+    # kind none is off: it leaves the other kinds' keys unread (a scene overrides the kind
+    # alone to switch actuation off), but a key no kind takes is still refused
+    keys.refuse_unknown(act, 'actuation', keys.ACTUATION_KIND_KEYS.get(akind, keys.ACTUATION_SPEC))
+    if akind != 'none':
+        source = keys.read(act, 'actuation', 'source', keys.ACTUATION_SPEC,
+                           choices=('routine', 'command') if akind == 'cable' else ('routine',))
+        actuation['source'] = source
+        if akind == 'cable':
+            flags |= sk.F_CABLE
+            cable = _read_cable(act, source, profile.X, nodes['free'], nodes['code_rim'],
+                                nodes['Nd'])
+            amp = cable.pop('amplitude')
+            actuation.update(cable)
+        else:
+            flags |= sk.F_MUSCLE
+            muscle = _read_muscle(act, profile, E)
+            amp = muscle.pop('amplitude')
+            actuation.update(muscle)
+        if source == 'routine':
+            flags |= sk.F_ROUTINE
+            timing = _read_routine(act)
+            actuation.update(amplitude=amp, **timing)
+    part = {
+        sk.P_AMP: amp,
+        sk.P_FREQ: timing['frequency_hz'],
+        sk.P_PULSE: PULSE_SHAPES[timing['pulse']],
+        sk.P_TC: timing['contraction_s'],
+        sk.P_TR: timing['release_s'],
+        sk.P_DELAY: timing['start_delay_s'],
+    }
+    return actuation, flags, part
+
+
+def _switch_flags(coupling: str, outlet: str, terms: dict, viscosity_pa_s: float) -> int:
+    """Return the kernels' switches (F_*) of the coupling, the outlet and the terms."""
+    flags = 0
+    if coupling == 'paper':
+        flags |= sk.F_PAPER
+    if outlet == 'edge':
+        flags |= sk.F_EDGE
+    if coupling == 'paper_code':
+        flags |= sk.F_CODE
+    if terms['viscosity'] and viscosity_pa_s > 0:
+        flags |= sk.F_VISC
+    if terms['drag']:
+        flags |= sk.F_DRAG
+    if terms['jet']:
+        flags |= sk.F_JET
+    if terms['vehicle_motion']:
+        flags |= sk.F_BODY
+    return flags
 
 
 def muscle_shape(
@@ -480,514 +823,91 @@ class ShellModel:
     @classmethod
     def from_scene(cls, scene: Mapping[str, Any]) -> 'ShellModel':
         """
-        Build from a parsed scene dict (schema: config/shell_robot.yaml).
+        Build from a parsed scene dict (keys: shell/scene_keys.py; e.g. config/shell_robot.yaml).
 
         Raises ModelError naming the key, the bad value and what is allowed.
         """
-        if not isinstance(scene, Mapping):
-            raise ModelError(f'scene: {scene!r} is not a mapping')
-        for k in scene:
-            if k not in SECTIONS:
-                raise ModelError(
-                    f'{k}: unknown section for the shell model (value {scene[k]!r}); allowed: '
-                    f'{", ".join(SECTIONS)}'
-                )
-        if scene.get('model', 'shell') != 'shell':
-            raise ModelError(
-                f'model: {scene.get("model")!r} is not the shell model; allowed: shell'
-            )
-        coupling = scene.get('coupling', 'consistent')
-        if coupling not in COUPLINGS:
-            raise ModelError(
-                f'coupling: {coupling!r} is not known; allowed: one of {", ".join(COUPLINGS)}'
-            )
-        paper = coupling == 'paper'
-        code = coupling == 'paper_code'
-        sim = _section(scene, 'simulation')
-        dt = _num(sim, 'dt_s', 'simulation', 0.0, 0.1, low_open=True)
-        integrator = _choice(
-            sim, 'integrator', 'simulation', tuple(INTEGRATORS), 'implicit_midpoint'
-        )
-        if (paper or code) and integrator == 'verlet':
-            raise ModelError(
-                f"simulation.integrator: 'verlet' is not available with coupling: {coupling}; "
-                'allowed: implicit_midpoint or backward_euler'
-            )
-        duration = _num(sim, 'duration_s', 'simulation', 0.0, 1e6, default=10.0)
-        tol = _num(sim, 'newton_tolerance', 'simulation', 1e-14, 1e-4, default=1e-9)
-        spec = sim.get('specialise_kernel', False)
-        if not isinstance(spec, bool):
-            raise ModelError(
-                f'simulation.specialise_kernel: {spec!r} is not a boolean; allowed: true or false'
-            )
-        keep_ws = sim.get('keep_newton_workspace', False)
-        if not isinstance(keep_ws, bool):
-            raise ModelError(
-                f'simulation.keep_newton_workspace: {keep_ws!r} is not a boolean; '
-                'allowed: true or false'
-            )
-        if keep_ws and spec:
-            raise ModelError(
-                'simulation.keep_newton_workspace: true is not available with '
-                'specialise_kernel: true (the kept workspace runs the generic kernel); '
-                'allowed: specialise_kernel: false, or keep_newton_workspace: false'
-            )
-
-        mesh = _section(scene, 'mesh')
-        _unknown(mesh, 'mesh', ('elements',))
-        ne = mesh.get('elements')
-        if isinstance(ne, bool) or not isinstance(ne, int) or not 4 <= ne <= 400:
-            raise ModelError(f'mesh.elements: {ne!r} rejected; allowed: an integer in [4, 400]')
-
-        geo = _section(scene, 'geometry')
-        _choice(
-            geo, 'kind', 'geometry', GEOMETRY_KINDS, None
-        )  # before build_profile: a list is unhashable there
-        profile = build_profile(geo, ne)
-
-        mat = _section(scene, 'material')
-        _unknown(
-            mat,
-            'material',
-            (
-                'youngs_modulus_pa',
-                'viscosity_pa_s',
-                'poisson_ratio',
-                'half_thickness_m',
-                'density_kg_m3',
-                'shear_correction',
-                'rotary_inertia_scale',
-            ),
-        )
-        Ey = _num(mat, 'youngs_modulus_pa', 'material', 10.0, 1e10)
-        eta_v = _num(mat, 'viscosity_pa_s', 'material', 0.0, 1e7)
-        nu = _num(mat, 'poisson_ratio', 'material', 0.0, 0.49)
-        h = _num(mat, 'half_thickness_m', 'material', 1e-6, 0.1)
-        rho_s = _num(mat, 'density_kg_m3', 'material', 10.0, 30000.0)
-        kappa = _num(mat, 'shear_correction', 'material', 0.1, 1.0, default=1.0)
-        rot = _num(mat, 'rotary_inertia_scale', 'material', 1.0, 1e6, default=1.0)
+        coupling = _read_coupling(scene)
+        sim, p_integrator = _read_integrator(scene, coupling)
+        geo, profile, p_shape = _read_geometry_and_mesh(scene)
         rmax0 = float(profile.r0.max())
-        if h > 0.25 * rmax0:
-            raise ModelError(
-                f'material.half_thickness_m: {h!r} m is not thin against the mantle radius '
-                f'{rmax0:.4g} m; '
-                f'allowed: half_thickness_m <= {0.25 * rmax0:.4g} m'
-            )
-
-        terms_sec = _section(scene, 'terms', required=False)
-        _unknown(terms_sec, 'terms', tuple(TERMS))
-        terms = dict(TERMS)
-        for k, v in terms_sec.items():
-            if not isinstance(v, bool):
-                raise ModelError(f'terms.{k}: {v!r} is not a boolean; allowed: true or false')
-            terms[k] = v
-
-        fl = _section(scene, 'fluid')
-        _unknown(
-            fl,
-            'fluid',
-            (
-                'density_kg_m3',
-                'added_mass_coefficient',
-                'added_mass_length_m',
-                'tangential_drag_coefficient',
-                'drag_coefficient',
-                'internal_inertia',
-                'internal_flow_momentum',
-            ),
-        )
-        rho = _num(fl, 'density_kg_m3', 'fluid', 1.0, 20000.0)
-        Ca = _num(fl, 'added_mass_coefficient', 'fluid', 0.0, 10.0, default=1.1)
-        la = _num(fl, 'added_mass_length_m', 'fluid', 0.0, 10.0, default=0.5 * rmax0)
-        Ct = _num(fl, 'tangential_drag_coefficient', 'fluid', 0.0, 10.0, default=0.05)
-        Cd = _num(fl, 'drag_coefficient', 'fluid', 0.0, 10.0, default=1.0)
-        internal_inertia = _choice(fl, 'internal_inertia', 'fluid', INTERNAL_INERTIA, 'none')
-        flow_momentum = fl.get('internal_flow_momentum', False)
-        if not isinstance(flow_momentum, bool):
-            raise ModelError(
-                f'fluid.internal_flow_momentum: {flow_momentum!r} is not a boolean; allowed: '
-                'true or false'
-            )
-        if flow_momentum and internal_inertia != 'one_dimensional':
-            # the momentum is the reference cavity's 1-D flow's (its S, like its Lambda, is that
-            # cavity's): it needs that flow
-            raise ModelError(
-                f'fluid.internal_flow_momentum: true needs internal_inertia: one_dimensional '
-                f'(the scene has {internal_inertia!r}); allowed: internal_flow_momentum: false, '
-                'or internal_inertia: one_dimensional'
-            )
-
-        jet = _section(scene, 'jet', required=terms['jet'])
-        _unknown(
-            jet,
-            'jet',
-            (
-                'outlet',
-                'outlet_radius_m',
-                'inlet_area_m2',
-                'thrust_coefficient',
-                'starting_jet',
-                'formation_number',
-            ),
-        )
-        outlet = _choice(
-            jet,
-            'outlet',
-            'jet',
-            OUTLETS,
-            'free_edge_fixed_nozzle' if code else 'edge' if paper else 'ring',
-        )
-        rring = profile.ring_radius_m
-        if code and outlet != 'free_edge_fixed_nozzle':
-            raise ModelError(
-                f"jet.outlet: {outlet!r} is not available with coupling: paper_code (the authors' "
-                'code: free open end, fixed nozzle Area_out = pi*Rn.^2); '
-                'allowed: free_edge_fixed_nozzle'
-            )
-        if outlet == 'edge':
-            if 'outlet_radius_m' in jet:
-                raise ModelError(
-                    f'jet.outlet_radius_m: {jet["outlet_radius_m"]!r} is not used with outlet: '
-                    f'edge (the outlet is the mantle edge, radius {rring:.4g} m at rest); '
-                    'allowed: leave it out, or outlet: ring'
-                )
-        free_edge = outlet in ('edge', 'free_edge_fixed_nozzle')
-        r_out = (
-            rring
-            if outlet == 'edge'
-            else _num(
-                jet,
-                'outlet_radius_m',
-                'jet',
-                1e-4,
-                rring,
-                default=min(0.0125, rring) if code else 0.5 * rring,
-            )
-        )
-        A_out = math.pi * r_out**2
-        inertance = 0.0
-        momentum_length = 0.0
-        if internal_inertia != 'none':
-            # the 1-D flow of the water inside (docs/theory/shell.md) ends at the
-            # cavity's own open section, so the jet must leave through the free edge; a smaller
-            # nozzle would add a contraction whose inertance this reading does not give
-            if outlet != 'edge' or code or integrator == 'verlet' or not terms['jet']:
-                raise ModelError(
-                    f'fluid.internal_inertia: {internal_inertia!r} is not available with '
-                    f'coupling: {coupling}, jet.outlet: {outlet}, integrator: {integrator}, '
-                    f'terms.jet: {str(terms["jet"]).lower()}; allowed: coupling paper or '
-                    'consistent, jet.outlet: edge, an implicit integrator and the jet on '
-                    '(or internal_inertia: none)'
-                )
-            dense = build_profile(geo, DENSE_ELEMENTS)
-            inertance = dense.internal_inertance_per_m()
-            if flow_momentum:
-                momentum_length = dense.internal_momentum_length_m()
-        A_in = _num(jet, 'inlet_area_m2', 'jet', 1e-8, 10.0, default=A_out + 3 * math.pi * 0.01**2)
-        Cf = _num(jet, 'thrust_coefficient', 'jet', 0.0, 2.0, default=1.0)
+        material, p_material = _read_material(scene, rmax0)
+        terms = _read_terms(scene)
+        fluid, p_fluid = _read_fluid_loads(scene, rmax0)
+        jet, outlet, p_jet = _read_jet_outlet(scene, coupling, terms, profile.ring_radius_m)
+        integrator = sim['integrator']
+        p_water = _read_water_inside(geo, fluid, coupling, outlet['outlet'], integrator,
+                                     terms['jet'])
         formation_number = starting_jet_setting(jet, coupling, integrator, terms['jet'])
+        pert, p_load = _read_static_load_and_initial_shape(scene, rmax0)
+        E = _element_table(profile)
+        code = coupling == 'paper_code'
+        nodes = _node_masses(profile, E, material, fluid, terms['added_mass'], code)
+        _node_supports(profile, E, nodes, code, outlet['free_edge'])
+        vehicle, p_vehicle = _read_vehicle(scene, nodes['shell_free_mass'])
+        actuation, actuation_flags, p_actuation = _read_actuation(scene, profile, E, nodes)
+        flags = _switch_flags(coupling, outlet['outlet'], terms, material['viscosity_pa_s'])
+        flags |= actuation_flags
 
-        veh = _section(scene, 'vehicle', required=False)
-        _unknown(veh, 'vehicle', ('mass_kg', 'added_mass_kg', 'initial_velocity_m_s'))
-
-        act = _section(scene, 'actuation', required=False)
-        akind = _choice(act, 'kind', 'actuation', ACTUATION_KINDS, 'none')
-
-        load = _section(scene, 'load', required=False)
-        _unknown(load, 'load', ('internal_pressure_pa',))
-        pstat = _num(load, 'internal_pressure_pa', 'load', -1e6, 1e6, default=0.0)
-
-        init = _section(scene, 'initial', required=False)
-        _unknown(init, 'initial', ('radial_perturbation_m',))
-        pert = _num(
-            init, 'radial_perturbation_m', 'initial', -0.5 * rmax0, 0.5 * rmax0, default=0.0
-        )
-
-        # ---- elements (discrete reference values, see shell_kernels)
-        X, r0, z0, th0 = profile.X, profile.r0, profile.z0, profile.theta0
-        dr, dz = np.diff(r0), np.diff(z0)
-        ds = np.hypot(dr, dz)
-        thm = 0.5 * (th0[:-1] + th0[1:])
-        r0m = 0.5 * (r0[:-1] + r0[1:])
-        lam0 = (dr * np.cos(thm) + dz * np.sin(thm)) / ds
-        eta0 = (-dr * np.sin(thm) + dz * np.cos(thm)) / ds
-        mu0 = np.diff(th0) / ds
-        E = np.zeros((ne, sk.N_ECOLS))
-        E[:, sk.E_DS] = ds
-        E[:, sk.E_R0M] = r0m
-        E[:, sk.E_LAM0] = lam0
-        E[:, sk.E_ETA0] = eta0
-        E[:, sk.E_K0] = mu0 * lam0
-        E[:, sk.E_VS0] = np.sin(thm) / r0m
-        E[:, sk.E_AREA] = 2 * math.pi * r0m * ds
-        Xm = 0.5 * (X[:-1] + X[1:]) / X[-1]
-
-        # ---- nodes
-        n1 = ne + 1
-        area = np.zeros(n1)
-        area[:-1] += 0.5 * E[:, sk.E_AREA]
-        area[1:] += 0.5 * E[:, sk.E_AREA]
-        m = rho_s * 2 * h * area
-        ma = Ca * rho * la * area if terms['added_mass'] else np.zeros(n1)
-        n0 = np.stack([-np.sin(th0), np.cos(th0)], axis=1)
-        Nd = np.zeros((n1, sk.N_NCOLS))
-        Nd[:, sk.N_MRR] = m + ma * n0[:, 0] ** 2
-        Nd[:, sk.N_MRZ] = ma * n0[:, 0] * n0[:, 1]
-        Nd[:, sk.N_MZZ] = m + ma * n0[:, 1] ** 2
-        if code:
-            # the authors' code: C_a times the shell's own mass, in every translation
-            # (octopus_driver.m: Gammas_ag = Gammas+ro_shel*B*diag([0 0 0 2*h 2*h 2*h]), B = 1.1)
-            ma = Ca * m if terms['added_mass'] else np.zeros(n1)
-            Nd[:, sk.N_MRR] = m + ma
-            Nd[:, sk.N_MRZ] = 0.0
-            Nd[:, sk.N_MZZ] = m + ma
-        Nd[:, sk.N_MTT] = rot * m * h * h / 3.0
-        Nd[:, sk.N_DAREA] = area
-        # axis contact radius: one half-thickness (inner faces meet), but never more than half the
-        # node's reference radius (nodes next to the pole sit within a thickness of the axis)
-        Nd[:, sk.N_HC] = np.minimum(h, 0.5 * r0)
-        Nd[0, sk.N_FIXR] = 1.0
-        Nd[0, sk.N_FIXT] = 1.0
-        Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXZ] = Nd[-1, sk.N_FIXT] = 1.0
-        free = np.ones(n1, bool)
-        free[0] = free[-1] = False
-        if free_edge:
-            # our reading of paper 000 section 5.1 ("a shrinkage of the nozzle area"): the edge
-            # carries no prescribed radius or angle (zero wrench), only its axial place on the body
-            Nd[-1, sk.N_FIXR] = Nd[-1, sk.N_FIXT] = 0.0
-            # its axial place is the body's: no r-z coupling of the added mass at that node (the
-            # residual would otherwise pull the vehicle speed held in the ring's axial slot into r)
-            Nd[-1, sk.N_MRZ] = 0.0
-            free[-1] = True
-        shell_free_mass = float(m[:-1].sum())
-        code_rim = 0
-        if code:
-            # the authors' code (octopus_driver.m, octopus_derivatives.m): the body holds X = 0, a
-            # hole whose wall is at alpha0 = pi/4 (sigmas_o = zeros(6,1)); the open end X = L
-            # carries no wrench ("condizioni su X=L"). Here the polar cap up to the first node
-            # whose wall is at pi/4 from the pole's is rigid, part of the body, its rim clamped;
-            # the edge is free in r, z and theta
-            code_rim = int(np.argmax(np.abs(th0 - th0[0]) >= math.pi / 4 - 1e-12))
-            if code_rim <= 0 or code_rim >= ne - 1:
-                raise ModelError(
-                    'coupling: paper_code needs a mantle whose wall turns by pi/4 from the pole '
-                    "before the edge (the clamped rim of the authors' code); "
-                    'this geometry does not'
-                )
-            Nd[:code_rim + 1, sk.N_FIXR] = Nd[:code_rim + 1, sk.N_FIXZ] = \
-                Nd[:code_rim + 1, sk.N_FIXT] = 1.0
-            Nd[-1, sk.N_FIXZ] = 0.0
-            free[: code_rim + 1] = False
-            shell_free_mass = float(m[code_rim + 1:].sum())
-            # the wall-borne load per reference area, on the wall from the rim on only (the
-            # rim's share of the cap's element is not wall): its work-equivalent nodal shares
-            Nd[:, sk.N_WWALL] = consistent_area_shares(r0, ds, code_rim)
-
-        # ---- vehicle
-        total = _num(veh, 'mass_kg', 'vehicle', 1e-6, 1e6, default=2.0 * shell_free_mass)
-        if total <= shell_free_mass:
-            raise ModelError(
-                f'vehicle.mass_kg: {total!r} kg is not more than the moving shell mass '
-                f'{shell_free_mass:.4g} kg; allowed: mass_kg > {shell_free_mass:.4g} '
-                '(shell plus payload)'
-            )
-        mx = _num(veh, 'added_mass_kg', 'vehicle', 0.0, 1e6, default=0.0)
-        U0 = _num(veh, 'initial_velocity_m_s', 'vehicle', -100.0, 100.0, default=0.0)
-        payload = total - shell_free_mass
-
-        # ---- actuation
-        flags = 0
-        if paper:
-            flags |= sk.F_PAPER
-        if outlet == 'edge':
-            flags |= sk.F_EDGE
-        if code:
-            flags |= sk.F_CODE
-        if terms['viscosity'] and eta_v > 0:
-            flags |= sk.F_VISC
-        if terms['drag']:
-            flags |= sk.F_DRAG
-        if terms['jet']:
-            flags |= sk.F_JET
-        if terms['vehicle_motion']:
-            flags |= sk.F_BODY
-        amp = 0.0
-        freq, tc, tr, delay, pulse = 1.0, 0.3, 0.3, 0.0, 'half_cosine'
-        actuation = {'kind': akind, 'source': 'none'}
-        if akind != 'none':
-            common = (
-                'kind',
-                'source',
-                'amplitude',
-                'frequency_hz',
-                'contraction_s',
-                'release_s',
-                'start_delay_s',
-                'pulse',
-            )
-            extra = (
-                ('distribution', 'max_cable_force_n')
-                if akind == 'cable'
-                else ('taper_fraction', 'desired_radius')
-            )
-            _unknown(act, 'actuation', common + extra)
-            src = _choice(
-                act,
-                'source',
-                'actuation',
-                ('routine', 'command') if akind == 'cable' else ('routine',),
-                'routine',
-            )
-            actuation['source'] = src
-            if akind == 'cable':
-                flags |= sk.F_CABLE
-                dist = _choice(act, 'distribution', 'actuation', DISTRIBUTIONS, 'uniform')
-                xi = X / X[-1]
-                shape = {'uniform': np.ones(n1), 'rising': xi, 'falling': 1.0 - xi}[dist]
-                # the pull is a line load along the deformable meridian (from the pole, or from
-                # paper_code's clamped rim) of total ``amplitude``; each node takes its
-                # work-equivalent share and the held ends' shares go to the supports, so the
-                # discrete load converges to the continuous one at the element's own order
-                w = consistent_line_load(X, shape, code_rim) * free
-                if w.sum() <= 0:
-                    raise ModelError(
-                        f'actuation.distribution: {dist!r} loads no free node; allowed: uniform'
-                    )
-                Nd[:, sk.N_WC] = w
-                actuation['distribution'] = dist
-                force_high = Command.LIMITS['cable_force_n'][1]
-                if (
-                    src == 'routine' or 'amplitude' in act
-                ):  # a command-driven scene keeps its routine's
-                    amp = _num(act, 'amplitude', 'actuation', 0.0, force_high)
-                actuation['max_cable_force_n'] = _num(
-                    act,
-                    'max_cable_force_n',
-                    'actuation',
-                    0.0,
-                    force_high,
-                    default=2.0 * amp if amp > 0 else force_high,
-                    low_open=True,
-                )
-            else:
-                flags |= sk.F_MUSCLE
-                amp = _num(act, 'amplitude', 'actuation', 0.0, 0.95)
-                taper = _num(act, 'taper_fraction', 'actuation', 0.01, 0.5, default=0.15)
-                desired = _choice(
-                    act, 'desired_radius', 'actuation', DESIRED_RADIUS, 'proportional'
-                )
-                E[:, sk.E_SMUS] = muscle_shape(desired, Xm, r0m, taper, amp)
-                actuation['taper_fraction'] = taper
-                actuation['desired_radius'] = desired
-            if src == 'routine':
-                flags |= sk.F_ROUTINE
-                freq = _num(act, 'frequency_hz', 'actuation', 0.0, 100.0, low_open=True)
-                per = 1.0 / freq
-                tc = _num(act, 'contraction_s', 'actuation', 0.0, per, low_open=True)
-                tr = _num(act, 'release_s', 'actuation', 0.0, per, low_open=True)
-                if tc + tr > per * (1 + 1e-12):
-                    raise ModelError(
-                        'actuation.release_s: contraction_s + release_s = '
-                        f'{tc + tr:.4g} s exceeds the period 1/frequency_hz = {per:.4g} s; '
-                        'allowed: contraction_s + release_s <= period'
-                    )
-                delay = _num(act, 'start_delay_s', 'actuation', 0.0, 1e6, default=0.0)
-                pulse = _choice(act, 'pulse', 'actuation', tuple(PULSE_SHAPES), 'half_cosine')
-                actuation.update(
-                    amplitude=amp,
-                    frequency_hz=freq,
-                    contraction_s=tc,
-                    release_s=tr,
-                    start_delay_s=delay,
-                    pulse=pulse,
-                )
-
-        # ---- parameters
         P = np.zeros(sk.N_PARAMS)
-        G = Ey / (2 * (1 + nu))
-        P[sk.P_PSI] = 2 * Ey * h / (1 - nu**2)
-        P[sk.P_PSI2] = 6 * eta_v * h / (1 - nu**2)
-        P[sk.P_JS] = h * h / 3
-        P[sk.P_GS] = 2 * h * G * kappa
-        P[sk.P_GV] = 2 * h * eta_v * kappa
-        P[sk.P_NU] = nu
-        P[sk.P_RHO] = rho
-        P[sk.P_AOUT] = A_out
-        P[sk.P_AIN] = A_in
-        P[sk.P_CF] = Cf
-        P[sk.P_CT] = Ct
-        P[sk.P_CD] = Cd
-        P[sk.P_MBODY] = payload + mx
-        P[sk.P_MSHELL] = shell_free_mass
-        P[sk.P_AMP] = amp
-        P[sk.P_FREQ] = freq
-        P[sk.P_PULSE] = PULSE_SHAPES[pulse]
-        P[sk.P_LAMBDA] = inertance
-        P[sk.P_LAMBDA_DEFORMING] = float(internal_inertia == 'one_dimensional_deforming')
-        P[sk.P_SMOM] = momentum_length
+        for part in (p_integrator, p_shape, p_material, p_fluid, p_jet, p_water, p_load,
+                     p_vehicle, p_actuation):
+            for index, value in part.items():
+                P[index] = value
         P[sk.P_FORMATION_NUMBER] = formation_number
-        P[sk.P_TC] = tc
-        P[sk.P_TR] = tr
-        P[sk.P_DT] = dt
-        P[sk.P_ALPHA] = INTEGRATORS[integrator][1]
-        P[sk.P_TOL] = tol
-        P[sk.P_RLIM] = 0.25 * h
-        P[sk.P_QLIM] = 20.0 * max(profile.length_m, rmax0)
-        P[sk.P_MAXIT] = 30
-        P[sk.P_DELAY] = delay
-        P[sk.P_V0] = profile.volume_m3()
-        P[sk.P_VLIM] = 1000.0
-        P[sk.P_PSTAT] = pstat
-        # axis contact: inner faces meet when the midsurface is one half-thickness from the axis;
-        # penalty modulus E over that gap (through-thickness compression of the wall)
-        P[sk.P_VSCALE] = float(ds.min()) / dt
-        P[sk.P_HC] = h
-        P[sk.P_KC] = Ey / h
+        # Newton's velocity scale: the shortest element per step
+        P[sk.P_VSCALE] = float(E[:, sk.E_DS].min()) / sim['dt_s']
 
         model = cls(
             profile=profile,
-            dt_s=dt,
+            dt_s=sim['dt_s'],
             integrator=integrator,
             flags=flags,
             P=P,
             E=E,
-            Nd=Nd,
-            node_mass=m,
-            node_added_mass=ma,
-            n0=n0,
-            payload_kg=payload,
-            body_added_mass_kg=mx,
+            Nd=nodes['Nd'],
+            node_mass=nodes['node_mass'],
+            node_added_mass=nodes['node_added_mass'],
+            n0=nodes['n0'],
+            payload_kg=vehicle['payload_kg'],
+            body_added_mass_kg=vehicle['body_added_mass_kg'],
             actuation=actuation,
             initial_perturbation_m=pert,
-            initial_velocity_m_s=U0,
-            duration_s=duration,
+            initial_velocity_m_s=vehicle['initial_velocity_m_s'],
+            duration_s=sim['duration_s'],
         )
-        model.specialise_kernel = spec
-        model.keep_newton_workspace = keep_ws
+        model.specialise_kernel = sim['specialise_kernel']
+        model.keep_newton_workspace = sim['keep_newton_workspace']
         model.coupling = coupling
-        model.outlet = outlet
+        model.outlet = outlet['outlet']
         model.isotropic_added_mass = code
-        model.code_rim = code_rim
+        model.code_rim = nodes['code_rim']
         if code:
             model._initial_energy = model._stored(model.initial_state())[0]
         model.material = {
-            'youngs_modulus_pa': Ey,
-            'viscosity_pa_s': eta_v,
-            'poisson_ratio': nu,
-            'half_thickness_m': h,
-            'density_kg_m3': rho_s,
+            name: material[name]
+            for name in ('youngs_modulus_pa', 'viscosity_pa_s', 'poisson_ratio',
+                         'half_thickness_m', 'density_kg_m3')
         }
-        # ---- refuse what cannot run
-        if integrator == 'verlet':
-            bound = model.stable_step_s(model.initial_state())
+        model._refuse_steps_it_cannot_run()
+        return model
+
+    def _refuse_steps_it_cannot_run(self) -> None:
+        """Refuse a step above verlet's stable step, or one that does not resolve the routine."""
+        dt = self.dt_s
+        if self.integrator == 'verlet':
+            bound = self.stable_step_s(self.initial_state())
             if dt > bound:
+                m = self.material
                 raise ModelError(
                     f'simulation.dt_s: {dt!r} s exceeds the explicit (verlet) stable step '
-                    f'{bound:.3g} s of this shell (E={Ey:g} Pa, eta_v={eta_v:g} Pa s, '
-                    f'{ne} elements); allowed: dt_s <= {bound:.3g} s, '
+                    f'{bound:.3g} s of this shell (E={m["youngs_modulus_pa"]:g} Pa, '
+                    f'eta_v={m["viscosity_pa_s"]:g} Pa s, '
+                    f'{self.E.shape[0]} elements); allowed: dt_s <= {bound:.3g} s, '
                     'or integrator: implicit_midpoint / backward_euler'
                 )
-        if flags & sk.F_ROUTINE:
+        if self.flags & sk.F_ROUTINE:
+            tc, tr, freq = self.P[sk.P_TC], self.P[sk.P_TR], self.P[sk.P_FREQ]
             limit = min(tc, tr, 1.0 / freq) / 10.0
             if dt > limit:
                 raise ModelError(
@@ -995,7 +915,6 @@ class ShellModel:
                     f'(contraction {tc:g} s, release {tr:g} s); allowed: dt_s <= {limit:.3g} s '
                     '(a tenth of the shortest phase)'
                 )
-        return model
 
     # ------------------------------------------------------------------ protocol
     @property
