@@ -12,7 +12,7 @@ import re
 import numpy as np
 from pulsejet_sim.core.model_io import Command, ModelError, SimulationBlowUp
 from pulsejet_sim.models.shell import kernels as sk
-from pulsejet_sim.models.shell.geometry import build_profile
+from pulsejet_sim.models.shell.geometry import build_reference_meridian
 from pulsejet_sim.models.shell.model import ShellModel
 import pytest
 from scipy.integrate import quad
@@ -22,7 +22,7 @@ from test_shell_coupling import cone_scene, run
 def test_inertance_of_a_closed_cylinder_is_its_length_over_three_sections():
     """A cylinder closed at one end: the flux grows linearly, Lambda = L / (3 pi R^2)."""
     length, radius = 0.12, 0.02
-    profile = build_profile(
+    profile = build_reference_meridian(
         {'kind': 'points', 'points': [[0.0, length], [radius, length], [radius, 0.0]]}, 4000
     )
     expected = length / (3.0 * math.pi * radius**2)
@@ -43,7 +43,7 @@ def test_inertance_of_the_ellipsoid_is_paper_001s_internal_flow():
 
     integral, _ = quad(lambda x: flux(x) ** 2 / (math.pi * b * b * (1.0 - x * x)), -1.0, x_e)
     expected = a * integral / flux(x_e) ** 2
-    profile = build_profile(
+    profile = build_reference_meridian(
         {
             'kind': 'ellipsoid',
             'semi_axis_axial_m': a,
@@ -257,7 +257,7 @@ def _momentum_scene(coupling, dt, momentum=True, **fluid):
 def test_momentum_length_of_a_closed_cylinder_and_of_paper_001s_ellipsoid():
     """S = int V_b/V dz: L/2 for a cylinder; for the ellipsoid a int F(x)/F(x_e) dx."""
     length, radius = 0.12, 0.02
-    cylinder = build_profile(
+    cylinder = build_reference_meridian(
         {'kind': 'points', 'points': [[0.0, length], [radius, length], [radius, 0.0]]}, 4000
     )
     assert cylinder.internal_momentum_length_m() == pytest.approx(length / 2.0, rel=1e-4)
@@ -268,7 +268,7 @@ def test_momentum_length_of_a_closed_cylinder_and_of_paper_001s_ellipsoid():
         return (1.0 + x) ** 2 * (2.0 - x)
 
     integral, _ = quad(flux, -1.0, x_e)
-    ellipsoid = build_profile(
+    ellipsoid = build_reference_meridian(
         {
             'kind': 'ellipsoid',
             'semi_axis_axial_m': a,

@@ -6,7 +6,7 @@ import pathlib
 
 import numpy as np
 from pulsejet_sim.core.model_io import Command, ModelError, Observation
-from pulsejet_sim.models.shell.geometry import build_profile
+from pulsejet_sim.models.shell.geometry import build_reference_meridian
 from pulsejet_sim.models.shell.model import ShellModel
 import pytest
 import yaml
@@ -110,7 +110,7 @@ def test_unknown_section_refused():
     ],
 )
 def test_geometries_sample_pole_to_ring(geometry):
-    p = build_profile(geometry, 20)
+    p = build_reference_meridian(geometry, 20)
     assert p.r0[0] == 0.0 and p.z0[-1] == 0.0 and np.all(p.r0[1:] > 0)
     ds = np.hypot(np.diff(p.r0), np.diff(p.z0))
     assert ds.max() / ds.min() < 1.5  # about equal arc length
@@ -121,7 +121,7 @@ def test_geometries_sample_pole_to_ring(geometry):
 
 def test_ellipsoid_volume_and_bad_points():
     a, b, ro = 0.05, 0.03, 1e-4
-    p = build_profile(
+    p = build_reference_meridian(
         {
             'kind': 'ellipsoid',
             'semi_axis_axial_m': a,
@@ -132,7 +132,7 @@ def test_ellipsoid_volume_and_bad_points():
     )
     assert p.volume_m3() == pytest.approx(4 / 3 * math.pi * a * b * b, rel=1e-3)
     with pytest.raises(ModelError, match='geometry.points'):
-        build_profile({'kind': 'points', 'points': [[0.01, 0.0], [0.02, 0.0], [0.03, 0.0]]}, 10)
+        build_reference_meridian({'kind': 'points', 'points': [[0.01, 0.0], [0.02, 0.0], [0.03, 0.0]]}, 10)
 
 
 def test_observation_profile_and_routine_command():

@@ -32,7 +32,7 @@ _DENSE = 4001
 
 
 @dataclass(frozen=True)
-class Profile:
+class ReferenceMeridian:
     """Reference meridian at the nodes (arrays of length N+1)."""
 
     X: np.ndarray  # reference arc length from the pole, m
@@ -224,7 +224,7 @@ _BUILDERS = {
 }
 
 
-def build_profile(geometry: Mapping[str, Any], n_elements: int) -> Profile:
+def build_reference_meridian(geometry: Mapping[str, Any], n_elements: int) -> ReferenceMeridian:
     """Sample the geometry of a scene at ``n_elements + 1`` nodes equally spaced in arc length."""
     if not isinstance(geometry, Mapping):
         raise ModelError(
@@ -268,4 +268,4 @@ def build_profile(geometry: Mapping[str, Any], n_elements: int) -> Profile:
             f'geometry: the {kind} profile touches the axis away from the pole; allowed: r > 0 '
             f'after the pole'
         )
-    return Profile(X=X, r0=rn, z0=zn, theta0=th)
+    return ReferenceMeridian(X=X, r0=rn, z0=zn, theta0=th)

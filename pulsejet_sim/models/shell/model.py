@@ -5,7 +5,7 @@ The mantle is coupled to a jet.
 
 Model
 -----
-*Shell.*  The meridian (reference arc length X from the pole to the ring, see shell_geometry.py)
+*Shell.*  The meridian (reference arc length X from the pole to the ring, see shell/geometry.py)
 is cut into N equal elements; every node carries ``(r, z, theta)``; strains, the Kelvin-Voigt law
 (half-thickness h, ``Psi = 2Eh/(1-nu^2)``, ``Psi2 = 6 eta_v h/(1-nu^2)``, ``Js = h^2/3``,
 ``q = 2hG eta + 2h eta_v eta_dot``) and their discrete energy/dissipation are documented in
@@ -75,19 +75,19 @@ only.
 
 *Water inside* (``fluid.internal_inertia: one_dimensional``, docs/theory/shell.md, the water
 inside).  Kinetic energy ``1/2 rho Lambda V'^2`` of paper 001's one-dimensional
-internal flow, ``Lambda`` the reference cavity's inertance (``Profile.internal_inertance_per_m``);
-by Lagrange's equation a uniform pressure ``-rho Lambda V''`` on the inner wall, stored in the
-ledger as ``stored_kinetic_internal_flow``.  ``one_dimensional_deforming`` takes
-``Lambda`` of the current shape (``shell.kernels.inertance``): the pressure becomes
-``-rho (Lambda V')'`` and the wall also feels ``+1/2 rho V'^2 grad Lambda``, Bernoulli's
-``-1/2 rho u^2``, which pulls a narrow section narrower while the water flows; a step that folds
+internal flow, ``Lambda`` the reference cavity's inertance
+(``ReferenceMeridian.internal_inertance_per_m``); by Lagrange's equation a uniform pressure
+``-rho Lambda V''`` on the inner wall, stored in the ledger as ``stored_kinetic_internal_flow``.
+``one_dimensional_deforming`` takes ``Lambda`` of the current shape (``shell.kernels.inertance``):
+the pressure becomes ``-rho (Lambda V')'`` and the wall also feels ``+1/2 rho V'^2 grad Lambda``,
+Bernoulli's ``-1/2 rho u^2``, which pulls a narrow section narrower while the water flows; a step that folds
 the meridian back along the axis stops the run (the 1-D flow is undefined there).
 ``fluid.internal_flow_momentum: true`` (with ``one_dimensional`` only) adds the
 same flow's momentum relative to the body, ``rho S V'`` along +z (``S = int V_b/V dz``,
-``Profile.internal_momentum_length_m``): the vehicle feels ``-rho S V''``; in the consistent
-coupling the wall also feels the uniform pressure ``-rho S U'`` (Lagrange's equation of the cross
-term ``rho S U V'``, stored as ``stored_kinetic_internal_cross``); in the paper coupling the
-wall's body frame has no such force and the ledger books the vehicle force's work as
+``ReferenceMeridian.internal_momentum_length_m``): the vehicle feels ``-rho S V''``; in the
+consistent coupling the wall also feels the uniform pressure ``-rho S U'`` (Lagrange's equation
+of the cross term ``rho S U V'``, stored as ``stored_kinetic_internal_cross``); in the paper
+coupling the wall's body frame has no such force and the ledger books the vehicle force's work as
 ``created_unpaid_internal_momentum``.
 
 *Axis contact.*  A deeply collapsed wall meets the opposite wall on the axis: below the contact
@@ -146,7 +146,7 @@ import numpy as np
 from pulsejet_sim.core.model_io import Command, ModelError, Observation, SimulationBlowUp
 from pulsejet_sim.models.shell import kernels as sk
 from pulsejet_sim.models.shell import scene_keys as keys
-from pulsejet_sim.models.shell.geometry import build_profile, Profile
+from pulsejet_sim.models.shell.geometry import build_reference_meridian, ReferenceMeridian
 
 _KERNELS: dict = {}
 INTEGRATORS = {'verlet': (0, 1.0), 'implicit_midpoint': (1, 0.5), 'backward_euler': (1, 1.0)}
@@ -245,22 +245,22 @@ def _read_integrator(scene: Mapping[str, Any], coupling: str) -> tuple[dict, Par
     return out, part
 
 
-def _read_geometry_and_mesh(scene: Mapping[str, Any]) -> tuple[Mapping, Profile, Part]:
-    """Return the ``geometry`` mapping and its reference profile on the ``mesh``'s elements."""
+def _read_geometry_and_mesh(scene: Mapping[str, Any]) -> tuple[Mapping, ReferenceMeridian, Part]:
+    """Return the ``geometry`` mapping and its reference meridian on the ``mesh``'s elements."""
     mesh = keys.section(scene, 'mesh')
     keys.refuse_unknown(mesh, 'mesh', keys.MESH_SPEC)
     elements = keys.read(mesh, 'mesh', 'elements', keys.MESH_SPEC)
     geo = keys.section(scene, 'geometry')
-    # before build_profile: a list is unhashable there
+    # before build_reference_meridian: a list is unhashable there
     keys.read(geo, 'geometry', 'kind', keys.GEOMETRY_KIND_SPEC)
-    profile = build_profile(geo, elements)
-    rmax0 = float(profile.r0.max())
+    meridian = build_reference_meridian(geo, elements)
+    rmax0 = float(meridian.r0.max())
     part = {
-        sk.P_V0: profile.volume_m3(),
-        sk.P_QLIM: 20.0 * max(profile.length_m, rmax0),
+        sk.P_V0: meridian.volume_m3(),
+        sk.P_QLIM: 20.0 * max(meridian.length_m, rmax0),
         sk.P_VLIM: 1000.0,
     }
-    return geo, profile, part
+    return geo, meridian, part
 
 
 def _read_material(scene: Mapping[str, Any], rmax0: float) -> tuple[dict, Part]:
@@ -388,7 +388,7 @@ def _read_water_inside(
                 'consistent, jet.outlet: edge, an implicit integrator and the jet on '
                 '(or internal_inertia: none)'
             )
-        dense = build_profile(geo, DENSE_ELEMENTS)
+        dense = build_reference_meridian(geo, DENSE_ELEMENTS)
         inertance = dense.internal_inertance_per_m()
         if fluid['internal_flow_momentum']:
             momentum_length = dense.internal_momentum_length_m()
@@ -415,9 +415,9 @@ def _read_static_load_and_initial_shape(
     return pert, {sk.P_PSTAT: pstat}
 
 
-def _element_table(profile: Profile) -> np.ndarray:
+def _element_table(meridian: ReferenceMeridian) -> np.ndarray:
     """Return the elements' discrete reference values E (see shell/kernels.py)."""
-    X, r0, z0, th0 = profile.X, profile.r0, profile.z0, profile.theta0
+    X, r0, z0, th0 = meridian.X, meridian.r0, meridian.z0, meridian.theta0
     dr, dz = np.diff(r0), np.diff(z0)
     ds = np.hypot(dr, dz)
     thm = 0.5 * (th0[:-1] + th0[1:])
@@ -437,10 +437,11 @@ def _element_table(profile: Profile) -> np.ndarray:
 
 
 def _node_masses(
-    profile: Profile, E: np.ndarray, material: dict, fluid: dict, added_mass_on: bool, code: bool
+    meridian: ReferenceMeridian, E: np.ndarray, material: dict, fluid: dict, added_mass_on: bool,
+    code: bool,
 ) -> dict:
     """Return the node table Nd with the nodes' masses, added masses and areas filled in."""
-    r0, th0 = profile.r0, profile.theta0
+    r0, th0 = meridian.r0, meridian.theta0
     n1 = E.shape[0] + 1
     h = material['half_thickness_m']
     area = np.zeros(n1)
@@ -471,13 +472,15 @@ def _node_masses(
     return {'Nd': Nd, 'node_mass': m, 'node_added_mass': ma, 'n0': n0}
 
 
-def _node_supports(profile: Profile, E: np.ndarray, nodes: dict, code: bool, free_edge: bool):
+def _node_supports(
+    meridian: ReferenceMeridian, E: np.ndarray, nodes: dict, code: bool, free_edge: bool
+):
     """
     Hold the pole and the ring (or the edge free, or paper_code's rim clamped) in nodes['Nd'].
 
     Adds the free nodes, the moving shell's mass and paper_code's rim node to `nodes`.
     """
-    Nd, m, th0 = nodes['Nd'], nodes['node_mass'], profile.theta0
+    Nd, m, th0 = nodes['Nd'], nodes['node_mass'], meridian.theta0
     ne = E.shape[0]
     Nd[0, sk.N_FIXR] = 1.0
     Nd[0, sk.N_FIXT] = 1.0
@@ -514,7 +517,7 @@ def _node_supports(profile: Profile, E: np.ndarray, nodes: dict, code: bool, fre
         shell_free_mass = float(m[code_rim + 1:].sum())
         # the wall-borne load per reference area, on the wall from the rim on only (the
         # rim's share of the cap's element is not wall): its work-equivalent nodal shares
-        Nd[:, sk.N_WWALL] = consistent_area_shares(profile.r0, E[:, sk.E_DS], code_rim)
+        Nd[:, sk.N_WWALL] = consistent_area_shares(meridian.r0, E[:, sk.E_DS], code_rim)
     nodes.update(free=free, shell_free_mass=shell_free_mass, code_rim=code_rim)
 
 
@@ -569,12 +572,12 @@ def _read_cable(act: Mapping[str, Any], source: str, X: np.ndarray, free: np.nda
     return {'amplitude': amp, 'distribution': dist, 'max_cable_force_n': rating}
 
 
-def _read_muscle(act: Mapping[str, Any], profile: Profile, E: np.ndarray) -> dict:
+def _read_muscle(act: Mapping[str, Any], meridian: ReferenceMeridian, E: np.ndarray) -> dict:
     """Read the muscle's amplitude and desired radius; fill the elements' desired-stretch drop."""
     amp = keys.read(act, 'actuation', 'amplitude', keys.ACTUATION_SPEC, high=0.95)
     taper = keys.read(act, 'actuation', 'taper_fraction', keys.ACTUATION_SPEC)
     desired = keys.read(act, 'actuation', 'desired_radius', keys.ACTUATION_SPEC)
-    X = profile.X
+    X = meridian.X
     Xm = 0.5 * (X[:-1] + X[1:]) / X[-1]
     E[:, sk.E_SMUS] = muscle_shape(desired, Xm, E[:, sk.E_R0M], taper, amp)
     return {'amplitude': amp, 'taper_fraction': taper, 'desired_radius': desired}
@@ -602,7 +605,7 @@ def _read_routine(act: Mapping[str, Any]) -> dict:
 
 
 def _read_actuation(
-    scene: Mapping[str, Any], profile: Profile, E: np.ndarray, nodes: dict
+    scene: Mapping[str, Any], meridian: ReferenceMeridian, E: np.ndarray, nodes: dict
 ) -> tuple[dict, int, Part]:
     """
     Return the ``actuation`` (cable or muscle actuation), its kernel flags and its parameters.
@@ -625,13 +628,13 @@ def _read_actuation(
         actuation['source'] = source
         if akind == 'cable':
             flags |= sk.F_CABLE
-            cable = _read_cable(act, source, profile.X, nodes['free'], nodes['code_rim'],
+            cable = _read_cable(act, source, meridian.X, nodes['free'], nodes['code_rim'],
                                 nodes['Nd'])
             amp = cable.pop('amplitude')
             actuation.update(cable)
         else:
             flags |= sk.F_MUSCLE
-            muscle = _read_muscle(act, profile, E)
+            muscle = _read_muscle(act, meridian, E)
             amp = muscle.pop('amplitude')
             actuation.update(muscle)
         if source == 'routine':
@@ -770,7 +773,7 @@ class ShellModel:
     def __init__(
         self,
         *,
-        profile: Profile,
+        meridian: ReferenceMeridian,
         dt_s: float,
         integrator: str,
         flags: int,
@@ -787,7 +790,7 @@ class ShellModel:
         initial_velocity_m_s: float = 0.0,
         duration_s: float | None = None,
     ):
-        self.ref = profile
+        self.ref = meridian
         self.dt_s = float(dt_s)
         self.integrator = integrator
         self.scheme, self.alpha = INTEGRATORS[integrator]
@@ -808,10 +811,10 @@ class ShellModel:
         self.initial_perturbation_m = initial_perturbation_m
         self.initial_velocity_m_s = initial_velocity_m_s
         self.duration_s = duration_s
-        self.n_nodes = profile.X.size
+        self.n_nodes = meridian.X.size
         # the published mantle radius: the node at half the meridian's length, which moves with the
         # mantle (the largest radius is often the clamped ring's, constant)
-        self.mid_node = int(np.argmin(np.abs(profile.X - 0.5 * profile.X[-1])))
+        self.mid_node = int(np.argmin(np.abs(meridian.X - 0.5 * meridian.X[-1])))
         self.substep_events = 0
         self.specialise_kernel = False
         self.keep_newton_workspace = False
@@ -829,23 +832,23 @@ class ShellModel:
         """
         coupling = _read_coupling(scene)
         sim, p_integrator = _read_integrator(scene, coupling)
-        geo, profile, p_shape = _read_geometry_and_mesh(scene)
-        rmax0 = float(profile.r0.max())
+        geo, meridian, p_shape = _read_geometry_and_mesh(scene)
+        rmax0 = float(meridian.r0.max())
         material, p_material = _read_material(scene, rmax0)
         terms = _read_terms(scene)
         fluid, p_fluid = _read_fluid_loads(scene, rmax0)
-        jet, outlet, p_jet = _read_jet_outlet(scene, coupling, terms, profile.ring_radius_m)
+        jet, outlet, p_jet = _read_jet_outlet(scene, coupling, terms, meridian.ring_radius_m)
         integrator = sim['integrator']
         p_water = _read_water_inside(geo, fluid, coupling, outlet['outlet'], integrator,
                                      terms['jet'])
         formation_number = starting_jet_setting(jet, coupling, integrator, terms['jet'])
         pert, p_load = _read_static_load_and_initial_shape(scene, rmax0)
-        E = _element_table(profile)
+        E = _element_table(meridian)
         code = coupling == 'paper_code'
-        nodes = _node_masses(profile, E, material, fluid, terms['added_mass'], code)
-        _node_supports(profile, E, nodes, code, outlet['free_edge'])
+        nodes = _node_masses(meridian, E, material, fluid, terms['added_mass'], code)
+        _node_supports(meridian, E, nodes, code, outlet['free_edge'])
         vehicle, p_vehicle = _read_vehicle(scene, nodes['shell_free_mass'])
-        actuation, actuation_flags, p_actuation = _read_actuation(scene, profile, E, nodes)
+        actuation, actuation_flags, p_actuation = _read_actuation(scene, meridian, E, nodes)
         flags = _switch_flags(coupling, outlet['outlet'], terms, material['viscosity_pa_s'])
         flags |= actuation_flags
 
@@ -859,7 +862,7 @@ class ShellModel:
         P[sk.P_VSCALE] = float(E[:, sk.E_DS].min()) / sim['dt_s']
 
         model = cls(
-            profile=profile,
+            meridian=meridian,
             dt_s=sim['dt_s'],
             integrator=integrator,
             flags=flags,
