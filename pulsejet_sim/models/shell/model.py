@@ -74,20 +74,19 @@ transfers are exact in the continuous model, so ``closure_error`` measures time 
 only.
 
 *Water inside* (``fluid.internal_inertia: one_dimensional``, docs/theory/shell.md, the water
-inside).  Kinetic energy ``1/2 rho Lambda V'^2`` of paper 001's one-dimensional
-internal flow, ``Lambda`` the reference cavity's inertance
-(``ReferenceMeridian.internal_inertance_per_m``); by Lagrange's equation a uniform pressure
-``-rho Lambda V''`` on the inner wall, stored in the ledger as ``stored_kinetic_internal_flow``.
-``one_dimensional_deforming`` takes ``Lambda`` of the current shape (``shell.kernels.inertance``):
-the pressure becomes ``-rho (Lambda V')'`` and the wall also feels ``+1/2 rho V'^2 grad Lambda``,
-Bernoulli's ``-1/2 rho u^2``, which pulls a narrow section narrower while the water flows; a step that folds
-the meridian back along the axis stops the run (the 1-D flow is undefined there).
-``fluid.internal_flow_momentum: true`` (with ``one_dimensional`` only) adds the
-same flow's momentum relative to the body, ``rho S V'`` along +z (``S = int V_b/V dz``,
-``ReferenceMeridian.internal_momentum_length_m``): the vehicle feels ``-rho S V''``; in the
-consistent coupling the wall also feels the uniform pressure ``-rho S U'`` (Lagrange's equation
-of the cross term ``rho S U V'``, stored as ``stored_kinetic_internal_cross``); in the paper
-coupling the wall's body frame has no such force and the ledger books the vehicle force's work as
+inside). Kinetic energy ``1/2 rho Lambda V'^2`` of paper 001's one-dimensional internal flow,
+``Lambda`` the reference cavity's inertance (``ReferenceMeridian.internal_inertance_per_m``); by
+Lagrange's equation a uniform pressure ``-rho Lambda V''`` on the inner wall, stored in the ledger
+as ``stored_kinetic_internal_flow``. ``one_dimensional_deforming`` takes ``Lambda`` of the current
+shape (``shell.kernels.inertance``): the pressure becomes ``-rho (Lambda V')'`` and the wall also
+feels ``+1/2 rho V'^2 grad Lambda``, Bernoulli's ``-1/2 rho u^2``, which pulls a narrow section
+narrower while the water flows; a step that folds the meridian back along the axis stops the run
+(the 1-D flow is undefined there). ``fluid.internal_flow_momentum: true`` (with ``one_dimensional``
+only) adds the same flow's momentum relative to the body, ``rho S V'`` along +z (``S = int V_b/V
+dz``, ``ReferenceMeridian.internal_momentum_length_m``): the vehicle feels ``-rho S V''``; in the
+consistent coupling the wall also feels the uniform pressure ``-rho S U'`` (Lagrange's equation of
+the cross term ``rho S U V'``, stored as ``stored_kinetic_internal_cross``); in the paper coupling
+the wall's body frame has no such force and the ledger books the vehicle force's work as
 ``created_unpaid_internal_momentum``.
 
 *Axis contact.*  A deeply collapsed wall meets the opposite wall on the axis: below the contact
