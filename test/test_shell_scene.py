@@ -132,7 +132,9 @@ def test_ellipsoid_volume_and_bad_points():
     )
     assert p.volume_m3() == pytest.approx(4 / 3 * math.pi * a * b * b, rel=1e-3)
     with pytest.raises(ModelError, match='geometry.points'):
-        build_reference_meridian({'kind': 'points', 'points': [[0.01, 0.0], [0.02, 0.0], [0.03, 0.0]]}, 10)
+        build_reference_meridian(
+            {'kind': 'points', 'points': [[0.01, 0.0], [0.02, 0.0], [0.03, 0.0]]}, 10
+        )
 
 
 def test_observation_profile_and_routine_command():
