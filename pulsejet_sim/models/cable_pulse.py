@@ -8,9 +8,8 @@ the same bits as the model's own routine at the same times. A rise over the cont
 fall over the release time, rest for the remaining period: half cosines, or straight lines (the
 authors' code's ``triangularPulse``, paper 000's study).
 
-numba's cache of a kernel that calls this function is keyed on the kernel's own file: after a
-change here, touch pulsejet_sim/models/shell/kernels.py (or clear the caches) so the kernels
-compile it again.
+numba's cache of a kernel that calls this function is keyed on the kernel's own file; the shell
+kernels therefore drop their cache when this file changes (core.kernel_cache).
 """
 
 from __future__ import annotations

@@ -58,9 +58,8 @@ start.  The step predicted to cross ``T* = F`` (``crosses_formation_number``) bo
 ``r_prev`` the previous step's booked rise (a state slot), see ``step_overpressure_impulse``.
 
 *Cache.*  shell.kernels compiles these njit functions into its own cached kernels, and numba
-invalidates a cache entry when the caller's file changes, not this one: after changing the code
-here, clear ``pulsejet_sim/models/shell/__pycache__/kernels*.nb[ic]`` (as lumped.kernels says of
-core.model_io).
+invalidates a cache entry when the caller's file changes, not this one; shell.kernels therefore
+drops its cache when this file changes (core.kernel_cache).
 """
 
 from __future__ import annotations

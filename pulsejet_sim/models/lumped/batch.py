@@ -58,6 +58,8 @@ from llvmlite import ir
 from numba import literally, njit, types
 from numba.extending import intrinsic
 import numpy as np
+from pulsejet_sim.core import model_io
+from pulsejet_sim.core.kernel_cache import drop_stale_cache
 from pulsejet_sim.models.lumped import kernels as K
 
 # LLVM flags of the default (exact=False) path: 'arcp' lets it multiply by one reciprocal where
@@ -807,3 +809,7 @@ def batch_kernel(flags: int, exact: bool = False, n_state: int = K.NY):
         np.zeros(1, np.int64),
         np.zeros(1, np.int64),
     )
+
+
+# numba keys this file's cache on this file alone: drop it when a module compiled in changes
+drop_stale_cache(advance_batch_exact, (K, model_io))

@@ -44,13 +44,14 @@ import math
 
 from numba import literally, njit
 import numpy as np
+from pulsejet_sim.core import model_io
+from pulsejet_sim.core.kernel_cache import drop_stale_cache
 from pulsejet_sim.core.model_io import VALVE_MIN_OPENING
 
-# the valve's seat: its opening is 0 or in [VALVE_SEAT, 1] (core.model_io says why).
-# Written out here, not assigned from core.model_io: numba freezes it into the cached kernels, and
-# it invalidates a cache entry when the function's own file changes, not model_io.py (nor, for
-# lumped.batch's kernels, this file: clear pulsejet_sim/models/lumped/__pycache__/*.nb[ic] after a
-# change)
+# the valve's seat: its opening is 0 or in [VALVE_SEAT, 1] (core.model_io says why). Written out
+# here as well and checked against core.model_io's, so the value numba freezes into the cached
+# kernels is visible in this file (drop_stale_cache below also drops the cache when model_io.py
+# changes)
 VALVE_SEAT = 1.5e-3
 if VALVE_SEAT != VALVE_MIN_OPENING:
     raise ImportError(
@@ -1146,3 +1147,7 @@ def adaptive_advance(flags, y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t
     return _adaptive_advance(
         literally(flags), y, mem, p, q_cmd, valve_cmd, duration, rtol, atol, t_out, out, stats
     )
+
+
+# numba keys this file's cache on this file alone: drop it when a module compiled in changes
+drop_stale_cache(advance, (model_io,))

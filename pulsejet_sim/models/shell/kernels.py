@@ -45,7 +45,8 @@ import math
 
 from numba import literally, njit
 import numpy as np
-from pulsejet_sim.models import starting_jet as sj
+from pulsejet_sim.core.kernel_cache import drop_stale_cache
+from pulsejet_sim.models import cable_pulse, starting_jet as sj
 from pulsejet_sim.models.cable_pulse import activation as pulse_activation
 
 # ---- flags (bitmask; compiled out only by advance_specialised via numba.literally) -----------
@@ -1590,3 +1591,7 @@ def stiffness_damping(flags, state, t, E, Nd, P):
     C = np.zeros((n, 2 * BW + 1))
     assemble_KC(flags, state[:n], vrel, U, t, E, Nd, P, K, C)
     return K, C
+
+
+# numba keys this file's cache on this file alone: drop it when a module compiled in changes
+drop_stale_cache(advance, (sj, cable_pulse))
