@@ -32,8 +32,8 @@ ACK_TIMEOUT_S = 5.0
 #: the spin loop looks at a signal or ``node.done`` this often when nothing else wakes it. Each
 #: wake-up of rclpy's single-threaded executor rebuilds its wait set in Python (~0.26 ms holding
 #: the interpreter); at 20 Hz, as before, it overlapped sim_node's sends often enough to show in
-#: their jitter p99 (benchmarks/results/viewer.md). A node wakes the loop itself when it is done
-#: (``done_guard``), so only a signal waits up to this long.
+#: their jitter p99 (benchmarks/results/viewer.md). A stop or the end of a run is seen this much
+#: later at most (the events executor takes no guard condition a node could wake it with).
 SPIN_TIMEOUT_S = 0.25
 
 
@@ -71,9 +71,8 @@ def run_node(
     Create the node, spin until a signal or until ``node.done``, then close it.
 
     Optional hooks on the node: ``executor_kind`` (str, the node's own choice, e.g. from a
-    parameter), ``start()`` after it joined the executor, ``done`` (bool; a node that sets it
-    from another thread triggers a guard condition of its own, so the loop sees it at once),
-    ``exit_code`` (int, default 0), ``on_stop(signum or None)`` before closing, ``close()``.
+    parameter), ``start()`` after it joined the executor, ``done`` (bool), ``exit_code`` (int,
+    default 0), ``on_stop(signum or None)`` before closing, ``close()``.
     executor_kind: `pulsejet_sim.ros.executor.make_executor`'s kind when the node has none
     (default: its choice).
     Returns the process exit code.

@@ -60,8 +60,6 @@ class SimNode(Node):
         self._outbox_due = None  # wall time of the last batch put there
         self._rejection_log = eng.LogThrottle(REJECTION_LOG_BURST, REJECTION_LOG_RATE_HZ)
         self._finished = False
-        # wakes run_node's spin loop when the pacing thread finishes the session
-        self._done_guard = self.create_guard_condition(lambda: None)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         p = params.declare(self)
         self.executor_kind = p['executor']  # run_node spins the node on this executor
@@ -203,7 +201,7 @@ class SimNode(Node):
         self._emit_events(events)
         if self.session.done:
             self._outbox.flush()
-            self._finish()
+            self._finished = True
 
     def _emit_events(self, events):
         log = self.get_logger()
@@ -237,11 +235,7 @@ class SimNode(Node):
 
     def _on_failure(self, text):
         self.get_logger().error(text)
-        self._finish()
-
-    def _finish(self):
         self._finished = True
-        self._done_guard.trigger()
 
     def _send_now(self, calls):
         self._outbox.flush()  # what was computed earlier goes first
