@@ -123,7 +123,8 @@ PARAMETERS = (
         'lookahead_s',
         0.0,
         'real_time pacing: simulated seconds the physics runs ahead of publication, so '
-        'slow steps do not delay states (each is published at its wall time); commands act that '
+        'slow steps do not delay states (each is published at its wall time, plus '
+        'publish_delay_periods); commands act that '
         'much '
         'later (0 = publish each state as soon as it is computed)',
         0.0,
