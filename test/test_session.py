@@ -196,6 +196,26 @@ def test_lookahead_computes_ahead_and_stamps_each_state_with_its_wall_time():
     assert ahead.dropped_s() == 0.0
 
 
+def test_a_publish_delay_sends_the_same_states_a_fixed_part_of_a_period_after_their_time():
+    delayed, plain = make(publish_delay_periods=0.2), make()
+    for s in (delayed, plain):
+        s.start(0.0)
+    ticks = [k * 0.01 + 0.0007 * (k % 3) for k in range(1, 31)]  # jittery wake-ups
+    delayed_states, plain_states = [], []
+    for k, now in enumerate(ticks):
+        if k == 10:  # a command between two ticks: taken at the next tick by both
+            for s in (delayed, plain):
+                s.accept({'pump_flow_m3_s': 4e-3, 'valve_opening': 0.5}, now - 0.004)
+        delayed_states += [e for e in delayed.tick(now) if isinstance(e, eng.Publish)]
+        plain_states += published(plain.tick(now))
+    # the states are computed at the same ticks from the same commands: equal, bit for bit
+    assert [e.observation for e in delayed_states] == plain_states
+    # each is due 0.2 periods after its own wall time, on the grid whatever the wake-up jitter
+    assert [e.due_wall for e in delayed_states] == pytest.approx(
+        [(k + 0.2) * 0.01 for k in range(1, 31)], abs=1e-12
+    )
+
+
 def test_outbox_sends_each_batch_at_its_time_in_order_and_flush_sends_the_rest_now():
     import time
 

@@ -101,6 +101,8 @@ def run_rate(
             'publish_rate_hz': float(rate_hz),
             'start_paused': True,
             'executor': sim_executor,
+            # each state sent once computed, as hardware in the loop wants (docs/user/ros.md)
+            'publish_delay_periods': 0.0,
         },
         log_dir / f'sim_node.{int(rate_hz)}.log',
         env,

@@ -61,6 +61,7 @@ def run(
     controller: bool,
     lookahead_s: float = 0.0,
     subscribe_marker: bool = False,
+    publish_delay_periods: float | None = None,
 ) -> dict:
     """
     Measure one live run of sim_node (see the module docstring); returns the figures.
@@ -68,6 +69,7 @@ def run(
     subscribe_marker: also subscribe to pulsejet/mantle_marker as RViz or Foxglove would
     (reliable), taking the serialised bytes (raw) so this process's own decoding does not load
     the cores sim_node runs on; the markers received are counted.
+    publish_delay_periods: sim_node's parameter of that name (None: its default).
     """
     from pulsejet_sim.ros.executor import make_executor
     from pulsejet_sim.scene import load_scene
@@ -95,6 +97,8 @@ def run(
         '-p',
         f'lookahead_s:={ros_value(lookahead_s)}',
     ]
+    if publish_delay_periods is not None:
+        sim_cmd += ['-p', f'publish_delay_periods:={ros_value(float(publish_delay_periods))}']
     procs = []
     context = rclpy.Context()
     rclpy.init(
@@ -210,6 +214,7 @@ def run(
         'cpu_percent': float(100 * (cpu1 - cpu0) / (wall1 - wall0)),
         'controller': controller,
         'lookahead_s': lookahead_s,
+        'publish_delay_periods': publish_delay_periods,
         'marker_subscribed': subscribe_marker,
         'markers_received': sum(1 for t_s, _ in markers if wall0 <= t_s <= wall1),
         'marker_bytes': markers[-1][1] if markers else 0,

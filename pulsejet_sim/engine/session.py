@@ -161,6 +161,12 @@ class SessionConfig:
     #: (Publish.due_wall). Commands then act up to this much later. 0 = publish each state as soon
     #: as it is computed.
     lookahead_s: float = 0.0
+    #: real_time: each state is sent this fraction of a publication period after its wall time
+    #: (Publish.due_wall), its physics and messages computed before: their varying cost then
+    #: stays out of the send times, which keep the wall grid as an idle process's wake-ups do
+    #: (benchmarks/performance/bench_viewer.py). What is sent is unchanged: the state is computed
+    #: at its wall time from the commands received by then, as with 0 (send once computed).
+    publish_delay_periods: float = 0.0
     paused: bool = False
 
     def describe(self) -> str:
@@ -355,7 +361,7 @@ class Session:
                 )
             )
         if due > 0:
-            self._deferring = self.config.lookahead_s > 0
+            self._deferring = self.config.lookahead_s > 0 or self.config.publish_delay_periods > 0
             try:
                 self._run_periods(due)
             finally:
@@ -441,7 +447,8 @@ class Session:
             due_wall = None
             if self._deferring:  # the wall time of the period being completed (the pacer's grid)
                 pacer = self._pacer
-                due_wall = pacer.t0 + (pacer.steps_done + 1) * pacer.dt_s / pacer.rtf
+                periods = pacer.steps_done + 1 + self.config.publish_delay_periods
+                due_wall = pacer.t0 + periods * pacer.dt_s / pacer.rtf
             self._emit(Publish(obs, ledger=ledger, due_wall=due_wall))
         self._check_duration()
         return True

@@ -29,6 +29,12 @@ DRAIN_S = 0.3
 #: loaded machine a sample lost on first send is repeated only on the reader's request, which a
 #: writer that has gone away never answers (a recording would miss the final state)
 ACK_TIMEOUT_S = 5.0
+#: the spin loop looks at a signal or ``node.done`` this often when nothing else wakes it. Each
+#: wake-up of rclpy's single-threaded executor rebuilds its wait set in Python (~0.26 ms holding
+#: the interpreter); at 20 Hz, as before, it overlapped sim_node's sends often enough to show in
+#: their jitter p99 (benchmarks/results/viewer.md). A stop or the end of a run is seen this much
+#: later at most (the events executor takes no guard condition a node could wake it with).
+SPIN_TIMEOUT_S = 0.25
 
 
 def wait_for_acknowledgements(node: Node, timeout_s: float) -> bool:
@@ -96,7 +102,7 @@ def run_node(
         if hasattr(node, 'start'):
             node.start()
         while running() and not getattr(node, 'done', False):
-            executor.spin_once(timeout_sec=0.05)
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
         code = getattr(node, 'exit_code', 0)
         if getattr(node, 'done', False):
             wait_for_acknowledgements(node, ACK_TIMEOUT_S)

@@ -15,7 +15,9 @@ with a warning naming it (throttled; /diagnostics counts every one); the held co
 Commands reach the pacing thread (`pulsejet_sim.engine.live_loop.LiveLoop`) through an inbox, so
 the executor never waits for a physics batch; the kernels release the GIL while they step. Reset
 returns to the scene's initial state and command at time 0 (/clock jumps back, like a Gazebo world
-reset). The diagnostic status is named after the
+reset). A real_time state is computed at its wall time, its messages built at once as CDR bytes,
+and sent publish_delay_periods of a period later by the outbox thread: what varies in computing
+it stays out of the send times. The diagnostic status is named after the
 node's fully qualified name, so two robots in one domain stay apart.
 Exit code: 0 on duration reached or SIGINT/SIGTERM, 1 when stopped after a blow-up, 2 on a bad
 scene or parameter.
@@ -208,7 +210,8 @@ class SimNode(Node):
         for e in events:
             if isinstance(e, eng.Publish):
                 calls = self.out.state(e.observation, e.ledger)
-                if e.due_wall is not None:  # computed ahead: the outbox sends it at its wall time
+                if e.due_wall is not None and e.due_wall > time.monotonic():
+                    # computed ahead of its send time: the outbox sends it then
                     self._outbox.put(e.due_wall, calls)
                     self._outbox_due = e.due_wall
                 else:

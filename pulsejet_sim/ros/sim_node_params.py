@@ -21,6 +21,10 @@ shows them):
   lookahead_s           (double, read-only)  real_time: simulated s the physics runs ahead; each
                                              state is sent at its own wall time, so slow steps do
                                              not jitter publication (default 0)
+  publish_delay_periods (double, read-only)  real_time: each state is sent this fraction of a
+                                             period after its wall time, computed before, so
+                                             computing does not jitter the send times (default
+                                             0.2; 0 = sent once computed)
   duration_s            (double, read-only)  simulated time after which the node exits (0 =
                                              forever)
   wait_for_subscribers  (int, read-only)     hold the clock at 0 until `/clock` has this many
@@ -119,11 +123,23 @@ PARAMETERS = (
         'lookahead_s',
         0.0,
         'real_time pacing: simulated seconds the physics runs ahead of publication, so '
-        'slow steps do not delay states (each is published at its wall time); commands act that '
+        'slow steps do not delay states (each is published at its wall time, plus '
+        'publish_delay_periods); commands act that '
         'much '
         'later (0 = publish each state as soon as it is computed)',
         0.0,
         1.0,
+        read_only=True,
+    ),
+    ParamSpec(
+        'publish_delay_periods',
+        0.2,
+        'real_time pacing: each state is sent this fraction of a publication period after its '
+        'wall time, computed (physics and messages) before, so its varying cost does not jitter '
+        'the send times; the states are the same as with 0 (sent as soon as computed, a latency '
+        'that much lower)',
+        0.0,
+        0.9,
         read_only=True,
     ),
     ParamSpec(
@@ -307,4 +323,5 @@ def session_config(values: dict[str, Any], publish_rate_hz: float) -> eng.Sessio
         control_period_s=values['control_period_s'],
         paused=values['start_paused'],
         lookahead_s=values['lookahead_s'],
+        publish_delay_periods=values['publish_delay_periods'],
     )

@@ -135,9 +135,13 @@ class StatePublisher:
                 f'odometry on {messages.TOPIC_ODOMETRY} only)'
             )
         self._profile_every = max(1, int(math.ceil(publish_rate_hz / PROFILE_RATE_MAX_HZ - 1e-9)))
-        # the profile's CDR bytes straight from the arrays (bag.cdr, what the offline runner
-        # records): one Point32 object per node cost the pacing thread ~0.6 ms a state
-        self._profile_encoder = TopicEncoder(frame_id=frames[1])
+        # every state message as CDR bytes straight from the values (bag.cdr, the bytes the
+        # offline runner records and rclpy would serialise): building and converting rclpy
+        # message objects was most of the time between a wake-up and /clock's send (the profile
+        # as one Point32 object per node alone ~0.6 ms a state)
+        self._encoder = TopicEncoder(frame_id=frames[1], odom_frame_id=frames[0],
+                                     base_frame_id=frames[1])
+        self._unframed_encoder = TopicEncoder(frame_id=NO_FRAME)
         # the Marker (~350 kB) is built and sent off the pacing thread
         self._marker_thread = (
             LatestJobThread(
@@ -172,13 +176,16 @@ class StatePublisher:
             profile = self.sim.profile()
             if not all(np.isfinite(arr).all() for arr in profile):
                 profile = None
+        ns = stamp_ns(obs.time_s)
         if profile is not None:  # before /clock, which the state's consumers take as its end
-            profile_cdr = self._profile_encoder.profile(*profile, stamp_ns(obs.time_s))
-            calls.append(self._call(messages.TOPIC_MANTLE_PROFILE, profile_cdr))
-        for topic, msg in messages.observation_messages(obs, self.frames[1], *self.frames):
-            calls.append(self._call(topic, msg))
+            calls.append(
+                self._call(messages.TOPIC_MANTLE_PROFILE, self._encoder.profile(*profile, ns))
+            )
+        for topic, data in self._encoder.observation(obs, ns):
+            calls.append(self._call(topic, data))
             if topic == messages.TOPIC_ODOMETRY and self.has_tf:
-                calls.append(self._call(TOPIC_TF, self._transform(msg)))
+                odometry = messages.odometry_message(obs, *self.frames)
+                calls.append(self._call(TOPIC_TF, self._transform(odometry)))
         if ledger:
             calls += self.ledger(obs.time_s)
             marker = self._pubs.get(messages.TOPIC_MANTLE_MARKER)
@@ -221,14 +228,14 @@ class StatePublisher:
         values = self.sim.energy_ledger()
         if not all(math.isfinite(v) for v in values.values()):
             return []
-        msg = messages.ledger_message(values, time_s, NO_FRAME)
-        return [self._call(messages.TOPIC_ENERGY_LEDGER, msg)]
+        data = self._unframed_encoder.ledger(values, stamp_ns(time_s))
+        return [self._call(messages.TOPIC_ENERGY_LEDGER, data)]
 
     def applied(self, command, time_s: float) -> Call:
         """Return the publish call of the command held from `time_s` on."""
         return self._call(
             messages.TOPIC_APPLIED_COMMAND,
-            messages.applied_command_message(command, time_s, NO_FRAME),
+            self._unframed_encoder.applied_command(command, stamp_ns(time_s)),
         )
 
     def diagnostics(self, level: str, name: str, hardware_id: str, message: str, values) -> None:
