@@ -24,7 +24,7 @@ shows them):
   publish_delay_periods (double, read-only)  real_time: each state is sent this fraction of a
                                              period after its wall time, computed before, so
                                              computing does not jitter the send times (default
-                                             0.2; 0 = sent once computed)
+                                             0 = sent once computed; 0.2 for a viewer)
   duration_s            (double, read-only)  simulated time after which the node exits (0 =
                                              forever)
   wait_for_subscribers  (int, read-only)     hold the clock at 0 until `/clock` has this many
@@ -133,7 +133,7 @@ PARAMETERS = (
     ),
     ParamSpec(
         'publish_delay_periods',
-        0.2,
+        0.0,
         'real_time pacing: each state is sent this fraction of a publication period after its '
         'wall time, computed (physics and messages) before, so its varying cost does not jitter '
         'the send times; the states are the same as with 0 (sent as soon as computed, a latency '
