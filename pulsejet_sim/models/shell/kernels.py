@@ -41,6 +41,7 @@ at the clamped ring, the cavity pressure and the jet.
 
 from __future__ import annotations
 
+from collections import namedtuple
 import math
 
 from numba import literally, njit
@@ -988,6 +989,668 @@ def _paper_vehicle_midpoint(flags, st, U, alpha, dt, P, impulse):
     return Us
 
 
+# ---- the time step, in stages -------------------------------------------------------------------
+# Each stage below is inlined into ``_advance_impl`` at numba's IR level (inline='always'), so the
+# compiled step is the one a single long function gives, bit for bit (docs/dev/architecture.md,
+# "Kernels: short stages, one compiled body").
+
+# The step's scratch vectors and matrices, allocated once per call by ``_advance_impl`` and shared
+# by the stages: the force evaluation's outputs (F, gV, vrel, st), the Verlet kicks' accelerations
+# (acc), the step's end and midpoint (q1, v1, vs), the Newton solve's residual, update, corrections
+# and matrices (R, dv, zz, gf, K, C, e_u, wz) and the end-of-step flow's shape (q_end, g_end,
+# g_lam).  One argument, not nineteen: Python 3.11+ passes a call of more than 30 arguments as
+# *args, which numba's inliner refuses.
+StepWork = namedtuple(
+    'StepWork',
+    (
+        'F', 'gV', 'vrel', 'st', 'acc', 'q1', 'v1', 'vs', 'R', 'dv', 'zz', 'gf', 'K', 'C', 'e_u',
+        'wz', 'q_end', 'g_end', 'g_lam',
+    ),
+)
+
+
+@njit(cache=True, nogil=True, inline='always')
+def node_positions(Nd, qn, vs, u_frame, h, q1):
+    """
+    Fill ``q1`` with the node positions ``h`` seconds on from ``qn`` at the velocities ``vs``.
+
+    The axial velocities are absolute and the shell lives in the body frame, which moves at
+    ``u_frame`` (m/s): its axial positions advance by ``vs - u_frame``.  Held dofs stay.
+    """
+    for i in range(Nd.shape[0]):
+        q1[3 * i] = qn[3 * i] + h * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
+        q1[3 * i + 1] = qn[3 * i + 1] + h * (vs[3 * i + 1] - u_frame) * (1.0 - Nd[i, N_FIXZ])
+        q1[3 * i + 2] = qn[3 * i + 2] + h * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
+
+
+@njit(cache=True, nogil=True, inline='always')
+def verlet_step(flags, state, qn, vn, U, t, amp_cmd, E, Nd, P, w):
+    """
+    Take one explicit kick-drift-kick (velocity Verlet) step from (qn, vn, U) to (q1, v1).
+
+    Velocity-dependent forces use the velocity available at each kick.  The ledger takes the
+    step's powers by the trapezoidal rule once the step passed its checks.  Returns (status, the
+    vehicle's end speed and its speed over the drift in m/s, its acceleration in m/s^2, thrust and
+    body drag in N, cavity pressure in Pa, volume in m^3, volume rate in m^3/s).
+    """
+    F, gV, vrel, st, acc, q1, v1, vs = w.F, w.gV, w.vrel, w.st, w.acc, w.q1, w.v1, w.vs
+    n1 = Nd.shape[0]
+    n = 3 * n1
+    tail = 6 * n1
+    dt = P[P_DT]
+    forces(flags, qn, vn, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st)
+    a0, thr0, dr0, ram0, pj0, po0, m0 = body_terms(flags, st, U, P)
+    pv0 = st[T_PVISC]
+    pd0 = st[T_PDRAG] - dr0 * U
+    pa0 = st[T_PACT]
+    pc0 = st[T_PCONT]
+    apply_minv(Nd, F, acc)
+    for k in range(n):
+        vs[k] = vn[k] + 0.5 * dt * acc[k]
+    Uh = U + 0.5 * dt * a0
+    node_positions(Nd, qn, vs, Uh, dt, q1)
+    forces(flags, q1, vs, Uh, t + dt, amp_cmd, E, Nd, P, F, gV, vrel, st)
+    a1, thr1, dr1, ram1, pj1, po1, m1 = body_terms(flags, st, Uh, P)
+    apply_minv(Nd, F, acc)
+    for k in range(n):
+        v1[k] = vs[k] + 0.5 * dt * acc[k]
+    U1 = Uh + 0.5 * dt * a1
+    code = _check(q1, v1, n1, P)
+    if code != OK:
+        return code, U1, Uh, a1, thr1, dr1, 0.0, 0.0, 0.0
+    state[tail + S_IN] += 0.5 * dt * (pa0 + st[T_PACT])
+    state[tail + S_VISC] += 0.5 * dt * (pv0 + st[T_PVISC])
+    state[tail + S_DRAG] += 0.5 * dt * (pd0 + st[T_PDRAG] - dr1 * Uh)
+    state[tail + S_JET] += 0.5 * dt * (pj0 + pj1)
+    state[tail + S_OTHER] += 0.5 * dt * (po0 + po1 + pc0 + st[T_PCONT])
+    return OK, U1, Uh, a1, thr1, dr1, st[T_P], st[T_VOL], st[T_VDOT]
+
+
+@njit(cache=True, nogil=True, inline='always')
+def predict_velocities(vn, vprev, alpha, have_prev, vs):
+    """Guess ``vs`` for Newton: extrapolate the previous step's velocity change; keep ``vn``."""
+    for k in range(vn.shape[0]):
+        vs[k] = vn[k] + alpha * (vn[k] - vprev[k]) if have_prev else vn[k]
+        vprev[k] = vn[k]
+
+
+@njit(cache=True, nogil=True, inline='always')
+def water_inside_at_start(Nd, qn, vn, u_frame, rho_lam, deforming, lam_start, g, g_lam):
+    """
+    Return the water inside's volume rate Q (m^3/s) and inertance (1/m) at the step's start.
+
+    Q = grad V . v_rel (docs/theory/shell.md, the water inside); the inertance is the shape's
+    own with ``deforming`` (one_dimensional_deforming), else ``lam_start`` unchanged.
+    """
+    q_start = 0.0
+    if rho_lam > 0.0:
+        n1 = Nd.shape[0]
+        volume_grad(qn, n1, g)
+        q_start = flow_rate(Nd, g, vn, u_frame)
+        if deforming:
+            lam_start = inertance(qn, n1, g_lam)
+    return q_start, lam_start
+
+
+@njit(cache=True, nogil=True, inline='always')
+def ring_at_start(flags, state, Nd, qn, vn, u_frame, P, g):
+    """
+    jet.starting_jet: the forming ring at the step's start (models/starting_jet.py).
+
+    Returns ``ring`` = (its inertance kappa in kg/m^4, 0 when no ring forms; the outlet area in
+    m^2; the formation time T*; the pulse's running peak outflow in m^3/s; whether pinch-off,
+    T* = F, is predicted within the step; the previous step's booked outflow rise in m^3/s).
+    """
+    n1 = Nd.shape[0]
+    tail = 6 * n1
+    kappa = 0.0
+    area = 0.0
+    crossing = False
+    t0 = state[tail + S_FORMATION_TIME]
+    if P[P_FORMATION_NUMBER] > 0.0 and sj.forming(t0, P[P_FORMATION_NUMBER]):
+        area = outlet_area(flags, qn, n1, P)
+        kappa = sj.ring_inertance(P[P_RHO], area)
+        volume_grad(qn, n1, g)
+        crossing = sj.crosses_formation_number(
+            t0, flow_rate(Nd, g, vn, u_frame), area, P[P_DT], P[P_FORMATION_NUMBER]
+        )
+    return kappa, area, t0, state[tail + S_PEAK_OUTFLOW], crossing, state[tail + S_LAST_RISE]
+
+
+@njit(cache=True, nogil=True, inline='always')
+def ring_impulse(ring, Nd, P, st, qn, vn, vs, Us, U, body, q_end, g_end, v1):
+    """
+    jet.starting_jet: the step's exit over-pressure impulse per area (Pa s, <= 0) at ``vs``.
+
+    Pinch-off within the step books its share before T* = F, from the midpoint's volume rate
+    (``st``, as the formation time's own update).  Returns (that impulse, the step's outflow
+    rise beyond the pulse's peak in m^3/s, the end volume rate in m^3/s).
+    """
+    kappa, area, t0, peak, crossing, last_rise = ring
+    dt = P[P_DT]
+    share = sj.pinch_off_share(t0, st[T_VDOT], st[T_AOUT], dt, P[P_FORMATION_NUMBER])
+    return starting_jet_impulse(
+        Nd, qn, vn, vs, Us, U, body, dt, P[P_ALPHA], q_end, g_end, v1, kappa, peak, crossing,
+        share, last_rise,
+    )
+
+
+@njit(cache=True, nogil=True, inline='always')
+def shell_residual(Nd, vn, vs, F, P, R):
+    """Fill R with the shell's residual M (v* - v_n)/alpha - dt F(q*, v*), N s (every dof)."""
+    dt = P[P_DT]
+    alpha = P[P_ALPHA]
+    for i in range(Nd.shape[0]):
+        dr_ = (vs[3 * i] - vn[3 * i]) / alpha
+        dz_ = (vs[3 * i + 1] - vn[3 * i + 1]) / alpha
+        dt_ = (vs[3 * i + 2] - vn[3 * i + 2]) / alpha
+        R[3 * i] = Nd[i, N_MRR] * dr_ + Nd[i, N_MRZ] * dz_ - dt * F[3 * i]
+        R[3 * i + 1] = Nd[i, N_MRZ] * dr_ + Nd[i, N_MZZ] * dz_ - dt * F[3 * i + 1]
+        R[3 * i + 2] = Nd[i, N_MTT] * dt_ - dt * F[3 * i + 2]
+
+
+@njit(cache=True, nogil=True, inline='always')
+def free_rows(Nd, body, rz, gV, R, gf):
+    """
+    Zero the held dofs' rows of ``R``; ``gf`` = grad V on the free dofs.
+
+    The vehicle's slot ``rz`` stays free when the vehicle is solved with the shell (``body``).
+    """
+    for k in range(R.shape[0]):
+        if fixed_dof(Nd, k) and not (body and k == rz):
+            R[k] = 0.0
+            gf[k] = 0.0
+        else:
+            gf[k] = gV[k]
+
+
+@njit(cache=True, nogil=True, inline='always')
+def vehicle_residual(flags, st, U, Us, P, rz, R):
+    """
+    Set the vehicle's row R[rz] = m (U* - U)/alpha - dt (its forces); return its mass m, kg.
+
+    In paper_code thrust and drag reach the vehicle through the clamped pole (``st[T_FRING]``).
+    """
+    dt = P[P_DT]
+    alpha = P[P_ALPHA]
+    ab_, thr_, dr_b, ram_, pj_, po_, mb = body_terms(flags, st, Us, P)
+    if flags & F_CODE:
+        R[rz] = mb * (Us - U) / alpha - dt * (-ram_ + st[T_FRING])
+    else:
+        R[rz] = mb * (Us - U) / alpha - dt * (thr_ + dr_b - ram_ + st[T_FRING])
+    return mb
+
+
+@njit(cache=True, nogil=True, inline='always')
+def water_inside_residual(
+    Nd, P, qn, vn, vs, U, Us, body, rz, water, rho_lam_now, gf, q_end, g_end, g_lam, v1, R
+):
+    """
+    Add the water inside's impulse to R; return the Newton matrix's rho Lambda, kg/m^4.
+
+    Its kinetic energy 1/2 rho Lambda Q^2 gives, by Lagrange's equation, the impulse
+    rho Lambda (Q_end - Q_start) grad V on the wall (and on the vehicle's row: it carries the
+    frame); with a deforming inertance Lambda at the step's end and start.  Its momentum
+    rho S Q relative to the body adds the cross term rho S U Q: the wall feels the uniform
+    pressure -rho S U', the vehicle -rho S Q' (docs/theory/shell.md).
+    """
+    rho_lam, deforming, rho_s, q_start, lam_start = water
+    dt = P[P_DT]
+    alpha = P[P_ALPHA]
+    u_end = U + (Us - U) / alpha if body else 0.0
+    q_flow_end = end_of_step_flow(Nd, qn, vn, vs, Us, u_end, dt, alpha, q_end, g_end, v1)
+    if deforming:
+        lam_end = inertance(q_end, Nd.shape[0], g_lam)
+        imp = P[P_RHO] * (lam_end * q_flow_end - lam_start * q_start)
+        rho_lam_now = P[P_RHO] * lam_end
+    else:
+        imp = rho_lam * (q_flow_end - q_start)
+    n = R.shape[0]
+    for k in range(n):
+        R[k] += imp * gf[k]
+    if rho_s > 0.0 and body:
+        du_ = (Us - U) / alpha
+        for k in range(n):
+            R[k] += rho_s * du_ * gf[k]
+        R[rz] += rho_s * (q_flow_end - q_start)
+    return rho_lam_now
+
+
+@njit(cache=True, nogil=True, inline='always')
+def narrowing_pull(Nd, P, st, q1, body, rz, g_lam, R):
+    """
+    Add the deforming inertance's pull +1/2 rho Q^2 grad Lambda on the wall to R (as -dt ...).
+
+    The flowing water pulls a narrow section narrower, the -1/2 rho u^2 of Bernoulli
+    (docs/validation/papers.md); Q is the midpoint's grad V . v_rel, which forces() left in
+    ``st`` at (q*, v*).
+    """
+    dt = P[P_DT]
+    inertance(q1, Nd.shape[0], g_lam)
+    q_mid = st[T_VDOT]
+    for k in range(R.shape[0]):
+        if not fixed_dof(Nd, k) or (body and k == rz):
+            R[k] -= dt * 0.5 * P[P_RHO] * q_mid * q_mid * g_lam[k]
+
+
+@njit(cache=True, nogil=True, inline='always')
+def residual_norm(R):
+    """Return |R|^2 for the line search; 1e300 when not finite."""
+    rnorm = 0.0
+    for k in range(R.shape[0]):
+        rnorm += R[k] * R[k]
+    if not math.isfinite(rnorm):
+        rnorm = 1e300
+    return rnorm
+
+
+@njit(cache=True, nogil=True, inline='always')
+def vehicle_jacobian_row(flags, Nd, P, st, Us, mb, rz, J):
+    """
+    Add the vehicle to the Newton matrix's diagonal at its slot ``rz`` (a held axial dof's).
+
+    Its mass, replacing the slot's node mass, and the d/dU* of drag and ram; in paper_code the
+    drag acts on every wall node and its d/dU* is left to the Newton iteration.
+    """
+    dt = P[P_DT]
+    alpha = P[P_ALPHA]
+    J[rz, BW] += (mb - Nd[(rz - 1) // 3, N_MZZ]) / alpha
+    if (flags & F_DRAG) and not (flags & F_CODE):
+        J[rz, BW] += dt * P[P_CD] * P[P_RHO] * math.pi * st[T_RMAX] * st[T_RMAX] * abs(Us)
+    if flags & F_JET:
+        J[rz, BW] += dt * P[P_RHO] * max(st[T_VDOT], 0.0)
+
+
+@njit(cache=True, nogil=True, inline='always')
+def factorise_newton_matrix(flags, q1, vrel, Us, ts, E, Nd, P, st, body, rz, mb, K, C, J):
+    """
+    Assemble J = M/alpha - dt (alpha dt K + C) at (q*, v*) and factorise it (banded LU).
+
+    Held dofs get identity rows and columns; the vehicle, when solved with the shell, takes a
+    held slot ``rz``: by translation invariance dF/dU* = alpha dt K[:, rz] + C[:, rz], so the
+    matrix stays banded.  Returns False when the factorisation fails.
+    """
+    n1 = Nd.shape[0]
+    n = 3 * n1
+    dt = P[P_DT]
+    alpha = P[P_ALPHA]
+    assemble_KC(flags, q1, vrel, Us, ts, E, Nd, P, K, C)
+    for k in range(n):
+        for j in range(2 * BW + 1):
+            J[k, j] = -dt * (alpha * dt * K[k, j] + C[k, j])
+    for i in range(n1):
+        J[3 * i, BW] += Nd[i, N_MRR] / alpha
+        J[3 * i, BW + 1] += Nd[i, N_MRZ] / alpha
+        J[3 * i + 1, BW - 1] += Nd[i, N_MRZ] / alpha
+        J[3 * i + 1, BW] += Nd[i, N_MZZ] / alpha
+        J[3 * i + 2, BW] += Nd[i, N_MTT] / alpha
+    if body:
+        vehicle_jacobian_row(flags, Nd, P, st, Us, mb, rz, J)
+    for k in range(n):
+        if fixed_dof(Nd, k) and not (body and k == rz):
+            for j in range(2 * BW + 1):
+                J[k, j] = 0.0
+                kk = k + j - BW
+                if 0 <= kk < n:
+                    J[kk, k - kk + BW] = 0.0
+            J[k, BW] = 1.0
+    return band_lu(J, n, BW)
+
+
+@njit(cache=True, nogil=True, inline='always')
+def correction_coefficient(flags, st, P, J, wz, gf, zz, water, rho_lam_now, ring, ring_j, c):
+    """
+    Return the coefficient c of the rank-one part left out of the factorised J; refresh zz.
+
+    Consistent coupling: the jet pressure's d(p)/dV' and the inertia of the water inside and of
+    the forming ring, c g g^T with zz = J^-1 g (the ring's none in the step that crosses
+    pinch-off: its impulse there follows the previous step's rate, not the unknowns).
+    paper_code: the wall-borne thrust and refill force, dF = w (dT/dV') g^T, zz = J^-1 w.
+    Otherwise ``c`` is returned unchanged.
+    """
+    rho_lam = water[0]
+    kappa = ring[0]
+    crossing = ring[4]
+    dt = P[P_DT]
+    n = gf.shape[0]
+    if (flags & F_JET) and (flags & F_CODE):
+        Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
+        c = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
+        band_solve(J, n, BW, wz, zz)
+    elif ((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0:
+        ring_c = kappa if ring_j < 0.0 and not crossing else 0.0
+        c = rank_one_coefficient(flags, st, P, dt, (rho_lam_now + ring_c) / P[P_ALPHA])
+        band_solve(J, n, BW, gf, zz)
+    return c
+
+
+@njit(cache=True, nogil=True, inline='always')
+def rank_one_correction(dv, gf, zz, c):
+    """Turn dv = J^-1 R into (J + c u g^T)^-1 R, zz = J^-1 u (Sherman-Morrison)."""
+    n = dv.shape[0]
+    gy = 0.0
+    gz = 0.0
+    for k in range(n):
+        gy += gf[k] * dv[k]
+        gz += gf[k] * zz[k]
+    fac = c * gy / (1.0 + c * gz)
+    for k in range(n):
+        dv[k] -= fac * zz[k]
+
+
+@njit(cache=True, nogil=True, inline='always')
+def newton_update(vs, dv):
+    """Take v* -= dv; return (max |dv|, max |v*|, sum dv: not finite on a blow-up), m/s."""
+    dmax = 0.0
+    vmax = 0.0
+    dsum = 0.0
+    for k in range(vs.shape[0]):
+        vs[k] -= dv[k]
+        dsum += dv[k]
+        if abs(dv[k]) > dmax:
+            dmax = abs(dv[k])
+        if abs(vs[k]) > vmax:
+            vmax = abs(vs[k])
+    return dmax, vmax, dsum
+
+
+@njit(cache=True, nogil=True, inline='always')
+def newton_solve(
+    flags, state, qn, vn, U, Us, ts, amp_cmd, E, Nd, P, body, rz, have_lu, water, ring, w, J, ze
+):
+    """
+    Solve the implicit step for the midpoint velocities ``vs`` (in place) by modified Newton.
+
+    The factorised matrix ``J`` is reused across iterations and steps (``have_lu``) and
+    refreshed when the contraction slows; the terms left out of its band (rank one or, with
+    the water's momentum, rank three) are added by Sherman-Morrison / Woodbury; a step that
+    raises |R| is halved (backtracking).  Returns (status, whether J may be reused).
+    """
+    F, gV, vrel, st, q1, v1, vs = w.F, w.gV, w.vrel, w.st, w.q1, w.v1, w.vs
+    R, dv, zz, gf, K, C, e_u, wz = w.R, w.dv, w.zz, w.gf, w.K, w.C, w.e_u, w.wz
+    q_end, g_end, g_lam = w.q_end, w.g_end, w.g_lam
+    n = 3 * Nd.shape[0]
+    tail = 2 * n
+    dt = P[P_DT]
+    alpha = P[P_ALPHA]
+    rho_lam, deforming, rho_s, q_start, lam_start = water
+    rho_lam_now = rho_lam  # the Newton matrix's inertia of the water inside
+    ring_j = 0.0
+    mb = 0.0
+    fresh = False
+    prev = 1e300
+    pcoef = 0.0
+    rprev = 1e300
+    lam = 1.0
+    for it in range(2 * int(P[P_MAXIT])):
+        if body:
+            Us = vs[rz]
+        node_positions(Nd, qn, vs, Us, alpha * dt, q1)
+        forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
+        shell_residual(Nd, vn, vs, F, P, R)
+        free_rows(Nd, body, rz, gV, R, gf)
+        if body:
+            mb = vehicle_residual(flags, st, U, Us, P, rz, R)
+        if rho_lam > 0.0:
+            rho_lam_now = water_inside_residual(
+                Nd, P, qn, vn, vs, U, Us, body, rz, water, rho_lam_now, gf, q_end, g_end, g_lam,
+                v1, R,
+            )
+            if deforming:
+                narrowing_pull(Nd, P, st, q1, body, rz, g_lam, R)
+        if ring[0] > 0.0:
+            ring_j, _, _ = ring_impulse(ring, Nd, P, st, qn, vn, vs, Us, U, body, q_end, g_end, v1)
+            for k in range(n):
+                R[k] += ring_j * gf[k]
+            if body:
+                R[rz] += ring[1] * ring_j  # the thrust A p_ex on the vehicle
+        state[tail + S_NIT] += 1.0
+        # backtracking line search on |R|: halve a Newton step that increased the residual
+        rnorm = residual_norm(R)
+        if rnorm > rprev and lam > 1.0 / 64.0:
+            lam *= 0.5
+            for k in range(n):
+                vs[k] += lam * dv[k]
+            continue
+        if rnorm > rprev and not fresh:
+            have_lu = False  # even short steps fail: the Jacobian is stale
+        rprev = rnorm
+        lam = 1.0
+        if have_lu:
+            # refresh the low-rank correction for the reused factorisation
+            pcoef = correction_coefficient(
+                flags, st, P, J, wz, gf, zz, water, rho_lam_now, ring, ring_j, pcoef
+            )
+        else:
+            fresh = True
+            state[tail + S_NJAC] += 1.0
+            if not factorise_newton_matrix(
+                flags, q1, vrel, Us, ts, E, Nd, P, st, body, rz, mb, K, C, J
+            ):
+                return ERR_NEWTON, have_lu
+            if rho_s > 0.0 and body:
+                e_u[rz] = 1.0
+                band_solve(J, n, BW, e_u, ze)
+            pcoef = correction_coefficient(
+                flags, st, P, J, wz, gf, zz, water, rho_lam_now, ring, ring_j, 0.0
+            )
+            have_lu = True
+        band_solve(J, n, BW, R, dv)
+        if rho_s > 0.0 and body:
+            _rank_three_correction(dv, gf, zz, ze, rz, pcoef, rho_s / alpha, n)
+        elif pcoef > 0.0:
+            rank_one_correction(dv, gf, zz, pcoef)
+        dmax, vmax, dsum = newton_update(vs, dv)
+        if not (math.isfinite(dsum) and math.isfinite(vmax)) or vmax > P[P_VLIM]:
+            return ERR_NEWTON, have_lu
+        if dmax <= P[P_TOL] * (vmax + P[P_VSCALE]):
+            return OK, have_lu
+        if (dmax > 0.3 * prev or it >= 6) and not fresh:
+            have_lu = False  # slow contraction: refresh the Jacobian
+        prev = dmax
+    return ERR_NEWTON, have_lu
+
+
+@njit(cache=True, nogil=True, inline='always')
+def jet_without_wall_pressure(flags, state, tail, st, P, po):
+    """
+    Book the jet's kinetic energy that no cavity pressure paid for (paper and paper_code).
+
+    On outflow the consistent wall pressure would have charged the shell the jet's kinetic energy
+    flux in the body frame, 1/2 rho A u^3: it is created (docs/theory/shell.md, "The ledger of
+    the paper coupling").  On inflow nothing is created (no suction acts on the wall) and the
+    inflow jet's kinetic energy is not booked out either: returns ``po`` (W) less it.
+    """
+    dt = P[P_DT]
+    if (flags & F_JET) and st[T_VDOT] < 0.0:
+        uj_ = -st[T_VDOT] / st[T_AOUT]
+        state[tail + S_CREATED] += dt * 0.5 * P[P_RHO] * st[T_AOUT] * uj_ * uj_ * uj_
+    elif flags & F_JET:
+        uin_ = st[T_VDOT] / P[P_AIN]
+        po -= 0.5 * P[P_RHO] * P[P_AIN] * uin_ * uin_ * uin_
+    return po
+
+
+@njit(cache=True, nogil=True, inline='always')
+def paper_vehicle_step(flags, state, Nd, P, st, qn, vn, vs, U, Us, water, q_end, g_end, v1):
+    """
+    Paper coupling: the vehicle after the shell's converged step, and the step's ledger.
+
+    The water inside's momentum changes by rho S (Q_end - Q_start) over the step, Q relative to
+    the body (the frame the paper's shell lives in); no wall force reacts to it, so its work on
+    the vehicle is created or destroyed (docs/theory/shell.md).  Returns (U* in m/s and the
+    vehicle's acceleration, thrust, drag, jet and other powers: ``body_terms`` at U*).
+    """
+    rho_s = water[2]
+    q_start = water[3]
+    tail = 6 * Nd.shape[0]
+    dt = P[P_DT]
+    alpha = P[P_ALPHA]
+    imp_mom = 0.0
+    if rho_s > 0.0:
+        q_end_flow = end_of_step_flow(Nd, qn, vn, vs, 0.0, 0.0, dt, alpha, q_end, g_end, v1)
+        imp_mom = rho_s * (q_end_flow - q_start)
+    if flags & F_BODY:
+        Us = _paper_vehicle_midpoint(flags, st, U, alpha, dt, P, imp_mom)
+        state[tail + S_CREATED_MOM] -= imp_mom * Us
+    acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
+    po = jet_without_wall_pressure(flags, state, tail, st, P, po)
+    return Us, acc_b, thr, dr, pj, po
+
+
+@njit(cache=True, nogil=True, inline='always')
+def ring_on_vehicle(ring, state, Nd, P, st, qn, vn, vs, Us, U, body, mb, q_end, g_end, v1):
+    """
+    jet.starting_jet, the converged step: the exit over-pressure p_ex on the vehicle and its work.
+
+    The vehicle feels A p_ex; the jet carries A p_ex (u_j - U) out (the wall paid A p_ex u_j
+    through grad V); midpoint quantities, so the ledger keeps the integrator's closure order.
+    Returns (p_ex in Pa, the thrust's, vehicle acceleration's and jet power's increments, the
+    outflow rise in m^3/s, the end volume rate in m^3/s).
+    """
+    area = ring[1]
+    dt = P[P_DT]
+    ring_j, ring_rise, ring_q1 = ring_impulse(
+        ring, Nd, P, st, qn, vn, vs, Us, U, body, q_end, g_end, v1
+    )
+    ring_pex = -ring_j / dt
+    ring_out = ring_j * (st[T_VDOT] + area * (Us if body else 0.0)) / dt
+    dacc = area * ring_pex / mb if body else 0.0
+    state[6 * Nd.shape[0] + S_OVERPRESSURE_WORK] += dt * ring_out
+    return ring_pex, area * ring_pex, dacc, ring_out, ring_rise, ring_q1
+
+
+@njit(cache=True, nogil=True, inline='always')
+def end_velocities(Nd, vn, vs, alpha, v1):
+    """Fill v1 with the theta-scheme's end velocities v_n + (v* - v_n)/alpha; held dofs 0."""
+    for k in range(vn.shape[0]):
+        v1[k] = 0.0 if fixed_dof(Nd, k) else vn[k] + (vs[k] - vn[k]) / alpha
+
+
+@njit(cache=True, nogil=True, inline='always')
+def implicit_step(
+    flags, state, qn, vn, U, t, amp_cmd, E, Nd, P, body, rz, have_lu, rho_lam, deforming, rho_s,
+    w, J, vprev, ze, ws,
+):
+    """
+    One step of the implicit theta-scheme from (``qn``, ``vn``, U) to (``q1``, ``v1``).
+
+    v* at q* = q_n + alpha dt v*_rel, M (v* - v_n)/alpha = dt F(q*, v*); alpha = 1/2 implicit
+    midpoint, 1 backward Euler.  The vehicle's midpoint speed U* is predicted
+    (U* = U_n + alpha dt a_n) and, in the consistent coupling (``body``), solved together with
+    the shell in the slot ``rz``; the paper coupling's is solved after the shell.  Returns
+    (status, the vehicle's end and midpoint speeds in m/s, its acceleration in m/s^2, thrust and
+    body drag in N, cavity pressure in Pa, volume in m^3, volume rate in m^3/s, whether ``J``
+    holds a reusable factorisation).
+    """
+    F, gV, vrel, st, q1, v1, vs = w.F, w.gV, w.vrel, w.st, w.q1, w.v1, w.vs
+    q_end, g_end, g_lam = w.q_end, w.g_end, w.g_lam
+    n1 = Nd.shape[0]
+    tail = 6 * n1
+    dt = P[P_DT]
+    alpha = P[P_ALPHA]
+    Us = U + alpha * dt * state[tail + S_A]
+    if not body:
+        Us = 0.0
+    ts = t + alpha * dt
+    predict_velocities(vn, vprev, alpha, ws[WS_HAVE_PREV] > 0.5, vs)
+    ws[WS_HAVE_PREV] = 1.0
+    vs[rz] = Us
+    u_frame = U if body else 0.0
+    q_start, lam_start = water_inside_at_start(
+        Nd, qn, vn, u_frame, rho_lam, deforming, P[P_LAMBDA], g_end, g_lam
+    )
+    water = (rho_lam, deforming, rho_s, q_start, lam_start)
+    ring = ring_at_start(flags, state, Nd, qn, vn, u_frame, P, g_end)
+    code, have_lu = newton_solve(
+        flags, state, qn, vn, U, Us, ts, amp_cmd, E, Nd, P, body, rz, have_lu, water, ring, w, J,
+        ze,
+    )
+    if code != OK:
+        return code, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, have_lu
+    # the converged step: the forces at its midpoint, then the vehicle and the ledger
+    if body:
+        Us = vs[rz]
+    node_positions(Nd, qn, vs, Us, alpha * dt, q1)
+    forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
+    Ush = Us  # the frame speed the shell's kinematics use (0 in the paper coupling)
+    ring_pex = 0.0
+    ring_rise = 0.0  # the step's outflow rise beyond the pulse's peak, m^3/s
+    ring_q1 = 0.0  # the converged step's end volume rate (while forming), m^3/s
+    if flags & F_PAPER:
+        Us, acc_b, thr, dr, pj, po = paper_vehicle_step(
+            flags, state, Nd, P, st, qn, vn, vs, U, Us, water, q_end, g_end, v1
+        )
+    else:
+        acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
+        if ring[0] > 0.0:
+            ring_pex, dthr, dacc, dpj, ring_rise, ring_q1 = ring_on_vehicle(
+                ring, state, Nd, P, st, qn, vn, vs, Us, U, body, mb, q_end, g_end, v1
+            )
+            thr += dthr
+            if body:
+                acc_b += dacc
+            pj += dpj
+        if flags & F_CODE:
+            # as in the paper coupling no cavity pressure pays for the jet; and the thrust, the
+            # refill force and the drag work at the wall's speed, not the vehicle's
+            # (docs/validation/papers.md)
+            po = jet_without_wall_pressure(flags, state, tail, st, P, po)
+            state[tail + S_CREATED_WALL] += dt * (
+                (thr + dr) * st[T_WREL] + st[T_FREF] * (Us + st[T_WREL])
+            )
+    node_positions(Nd, qn, vs, Ush, dt, q1)
+    end_velocities(Nd, vn, vs, alpha, v1)
+    U1 = U + (Us - U) / alpha
+    code = _check(q1, v1, n1, P)
+    if code != OK:
+        return code, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, have_lu
+    if deforming and folded(q1, n1):
+        # the section is no longer a function of z: the 1-D internal flow is undefined
+        return ERR_FOLD, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, have_lu
+    state[tail + S_IN] += dt * st[T_PACT]
+    state[tail + S_VISC] += dt * st[T_PVISC]
+    state[tail + S_DRAG] += dt * (st[T_PDRAG] - dr * Us)
+    state[tail + S_JET] += dt * pj
+    state[tail + S_OTHER] += dt * (po + st[T_PCONT])
+    pres, vol, vdot = st[T_P], st[T_VOL], st[T_VDOT]
+    if P[P_FORMATION_NUMBER] > 0.0:
+        pres += ring_pex
+        # the pulse's running peak (kept past pinch-off: ring_q1 = 0 there), reset with T*
+        state[tail + S_PEAK_OUTFLOW] = sj.next_peak_outflow(ring[3], vdot, ring_q1, ring_rise)
+        state[tail + S_LAST_RISE] = ring_rise
+        state[tail + S_FORMATION_TIME] = sj.next_formation_time(
+            state[tail + S_FORMATION_TIME], vdot, st[T_AOUT], dt
+        )
+    return OK, U1, Us, acc_b, thr, dr, pres, vol, vdot, have_lu
+
+
+@njit(cache=True, nogil=True, inline='always')
+def commit_step(flags, state, P, st, q1, v1, x, t, U1, Uh, acc_b, thr, dr, pres, vol, vdot):
+    """Write the step that passed its checks into ``state``: shell, vehicle, observed stats."""
+    n = q1.shape[0]
+    tail = 2 * n
+    dt = P[P_DT]
+    if not (flags & F_BODY):
+        U1 = 0.0
+        Uh = 0.0
+        acc_b = 0.0
+    for k in range(n):
+        state[k] = q1[k]
+        state[n + k] = v1[k]
+    state[tail + S_X] = x + dt * Uh
+    state[tail + S_U] = U1
+    state[tail + S_A] = acc_b
+    state[tail + S_THR] = thr
+    state[tail + S_BDRAG] = dr
+    state[tail + S_P] = pres
+    state[tail + S_VOL] = vol
+    state[tail + S_VDOT] = vdot
+    state[tail + S_TIME] = t + dt
+    if flags & F_JET:
+        state[tail + S_UJ] = -vdot / (st[T_AOUT] if vdot < 0 else P[P_AIN])
+
+
 @njit(cache=True, nogil=True)
 def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vprev, ze, ws):
     """
@@ -1004,46 +1667,34 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
     n = 3 * n1
     tail = 6 * n1
     dt = P[P_DT]
-    F = np.zeros(n)
-    gV = np.zeros(n)
-    vrel = np.zeros(n)
-    st = np.zeros(N_STATS)
-    acc = np.zeros(n)
     qn = np.empty(n)
     vn = np.empty(n)
-    q1 = np.empty(n)
-    v1 = np.empty(n)
-    vs = np.empty(n)
-    R = np.empty(n)
-    dv = np.empty(n)
-    zz = np.empty(n)
-    gf = np.empty(n)
-    K = np.zeros((n, 2 * BW + 1))
-    C = np.zeros((n, 2 * BW + 1))
-    alpha = P[P_ALPHA]
-    maxit = int(P[P_MAXIT])
     wz = np.zeros(n)  # paper_code: the axial load's weights (area shares), rank-one Jacobian term
+    # the vehicle's slot in the implicit system: the clamped ring's axial dof (paper_code: the
+    # clamped rim's); solved with the shell only in the consistent coupling (and paper_code)
+    rz = 3 * (n1 - 1) + 1
     if flags & F_CODE:
-        kc = code_rim(Nd)
-        for i in range(kc, n1):
+        rz = 3 * code_rim(Nd) + 1
+        for i in range(rz // 3, n1):
             wz[3 * i + 1] = Nd[i, N_WWALL]
+    body = (flags & F_BODY) != 0 and (flags & F_PAPER) == 0
     # the factorised Newton matrix is reused across steps (modified Newton) and, with a kept
     # workspace, across calls
     have_lu = ws[WS_HAVE_LU] > 0.5
-    have_prev = ws[WS_HAVE_PREV] > 0.5
     # the water inside: 1/2 rho Lambda Q^2 with Q = grad V . v_rel (docs/theory/shell.md, the
-    # water inside); Lagrange's equation gives the impulse rho Lambda (Q_end - Q_start) grad V
+    # water inside), Lambda following the shape when deforming; its momentum relative to the body
+    # rho S Q along +z
     rho_lam = P[P_RHO] * P[P_LAMBDA]
     deforming = rho_lam > 0.0 and P[P_LAMBDA_DEFORMING] > 0.5
-    g_end = np.zeros(n)
-    q_end = np.zeros(n)
-    g_lam = np.zeros(n)
-    lam_start = P[P_LAMBDA]
-    lam_end = P[P_LAMBDA]
-    rho_lam_now = rho_lam  # the Newton matrix's inertia of the water inside
-    # that water's momentum relative to the body, rho S Q along +z
     rho_s = P[P_RHO] * P[P_SMOM]
-    e_u = np.zeros(n)  # the vehicle's unit row (J^-1 of it: ze, consistent coupling)
+    w = StepWork(
+        np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(N_STATS), np.zeros(n),  # F gV vrel st acc
+        np.empty(n), np.empty(n), np.empty(n),  # q1 v1 vs
+        np.empty(n), np.empty(n), np.empty(n), np.empty(n),  # R dv zz gf
+        np.zeros((n, 2 * BW + 1)), np.zeros((n, 2 * BW + 1)),  # K C
+        np.zeros(n),  # e_u: the vehicle's unit row (J^-1 of it: ze, consistent coupling)
+        wz, np.zeros(n), np.zeros(n), np.zeros(n),  # wz q_end g_end g_lam
+    )
     for step in range(n_steps):
         t = time0 + step * dt
         for k in range(n):
@@ -1054,409 +1705,19 @@ def _advance_impl(flags, state, time0, n_steps, amp_cmd, E, Nd, P, scheme, J, vp
             U = 0.0
         x = state[tail + S_X]
         if scheme == 0:
-            # ---- explicit kick-drift-kick (velocity Verlet; velocity-dependent forces use the
-            # velocity available at each kick)
-            forces(flags, qn, vn, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st)
-            a0, thr0, dr0, ram0, pj0, po0, m0 = body_terms(flags, st, U, P)
-            pv0 = st[T_PVISC]
-            pd0 = st[T_PDRAG] - dr0 * U
-            pa0 = st[T_PACT]
-            pc0 = st[T_PCONT]
-            apply_minv(Nd, F, acc)
-            for k in range(n):
-                vs[k] = vn[k] + 0.5 * dt * acc[k]
-            Uh = U + 0.5 * dt * a0
-            for i in range(n1):
-                q1[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
-                q1[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Uh) * (1.0 - Nd[i, N_FIXZ])
-                q1[3 * i + 2] = qn[3 * i + 2] + dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
-            forces(flags, q1, vs, Uh, t + dt, amp_cmd, E, Nd, P, F, gV, vrel, st)
-            a1, thr1, dr1, ram1, pj1, po1, m1 = body_terms(flags, st, Uh, P)
-            apply_minv(Nd, F, acc)
-            for k in range(n):
-                v1[k] = vs[k] + 0.5 * dt * acc[k]
-            U1 = Uh + 0.5 * dt * a1
-            code = _check(q1, v1, n1, P)
-            if code != OK:
-                return step, code
-            state[tail + S_IN] += 0.5 * dt * (pa0 + st[T_PACT])
-            state[tail + S_VISC] += 0.5 * dt * (pv0 + st[T_PVISC])
-            state[tail + S_DRAG] += 0.5 * dt * (pd0 + st[T_PDRAG] - dr1 * Uh)
-            state[tail + S_JET] += 0.5 * dt * (pj0 + pj1)
-            state[tail + S_OTHER] += 0.5 * dt * (po0 + po1 + pc0 + st[T_PCONT])
-            thr, dr, pres, vol, vdot, acc_b = thr1, dr1, st[T_P], st[T_VOL], st[T_VDOT], a1
+            code, U1, Uh, acc_b, thr, dr, pres, vol, vdot = verlet_step(
+                flags, state, qn, vn, U, t, amp_cmd, E, Nd, P, w
+            )
         else:
-            # ---- implicit theta-scheme on the shell: v* at q* = q_n + alpha dt v*_rel,
-            # M (v* - v_n)/alpha = dt F(q*, v*); alpha = 1/2 implicit midpoint, 1 backward Euler.
-            # The vehicle speed is predicted (U* = U_n + alpha dt a_n) and corrected afterwards.
-            # The vehicle's midpoint speed U* is solved together with the shell (monolithic):
-            # it takes the slot of the clamped ring's axial dof (rz), which keeps the system banded
-            # because, by translation invariance, dF/dU* = alpha dt K[:, rz] + C[:, rz].
-            # monolithic vehicle only in the consistent coupling (the paper's is solved after the
-            # shell)
-            body = (flags & F_BODY) != 0 and (flags & F_PAPER) == 0
-            rz = 3 * (n1 - 1) + 1
-            if flags & F_CODE:
-                rz = 3 * code_rim(Nd) + 1  # the clamped rim's axial slot carries the vehicle
-            Us = U + alpha * dt * state[tail + S_A]
-            if not body:
-                Us = 0.0
-            ts = t + alpha * dt
-            for k in range(n):
-                # predictor: extrapolate the velocity change of the previous step
-                vs[k] = vn[k] + alpha * (vn[k] - vprev[k]) if have_prev else vn[k]
-                vprev[k] = vn[k]
-            have_prev = True
-            ws[WS_HAVE_PREV] = 1.0
-            vs[rz] = Us
-            q_start = 0.0  # the water's volume rate at the start of the step, m^3/s
-            if rho_lam > 0.0:
-                volume_grad(qn, n1, g_end)
-                q_start = flow_rate(Nd, g_end, vn, U if body else 0.0)
-                if deforming:
-                    lam_start = inertance(qn, n1, g_lam)
-            # jet.starting_jet: the forming ring's exit over-pressure (models/starting_jet.py)
-            ring_kappa = 0.0
-            ring_peak = state[tail + S_PEAK_OUTFLOW]
-            ring_t0 = state[tail + S_FORMATION_TIME]  # T* at the step's start
-            ring_area = 0.0
-            ring_j = 0.0
-            ring_last_rise = state[tail + S_LAST_RISE]
-            ring_crossing = False  # pinch-off (T* = F) predicted within this step
-            ring_share = 1.0  # the share of the step before pinch-off
-            ring_rise = 0.0  # the step's outflow rise beyond the pulse's peak, m^3/s
-            ring_q1 = 0.0  # the converged step's end volume rate (while forming), m^3/s
-            ring_pex = 0.0
-            if P[P_FORMATION_NUMBER] > 0.0 and sj.forming(ring_t0, P[P_FORMATION_NUMBER]):
-                ring_area = outlet_area(flags, qn, n1, P)
-                ring_kappa = sj.ring_inertance(P[P_RHO], ring_area)
-                volume_grad(qn, n1, g_end)
-                ring_crossing = sj.crosses_formation_number(
-                    ring_t0, flow_rate(Nd, g_end, vn, U if body else 0.0), ring_area, dt,
-                    P[P_FORMATION_NUMBER],
-                )
-            fresh = False
-            converged = False
-            prev = 1e300
-            pcoef = 0.0
-            rprev = 1e300
-            lam = 1.0
-            for it in range(2 * maxit):
-                if body:
-                    Us = vs[rz]
-                for i in range(n1):
-                    q1[3 * i] = qn[3 * i] + alpha * dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
-                    q1[3 * i + 1] = qn[3 * i + 1] + alpha * dt * (vs[3 * i + 1] - Us) * (
-                        1.0 - Nd[i, N_FIXZ]
-                    )
-                    q1[3 * i + 2] = qn[3 * i + 2] + alpha * dt * vs[3 * i + 2] * (
-                        1.0 - Nd[i, N_FIXT]
-                    )
-                forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
-                # residual R = M (v* - v_n)/alpha - dt F  (free dofs)
-                for i in range(n1):
-                    dr_ = (vs[3 * i] - vn[3 * i]) / alpha
-                    dz_ = (vs[3 * i + 1] - vn[3 * i + 1]) / alpha
-                    dt_ = (vs[3 * i + 2] - vn[3 * i + 2]) / alpha
-                    R[3 * i] = Nd[i, N_MRR] * dr_ + Nd[i, N_MRZ] * dz_ - dt * F[3 * i]
-                    R[3 * i + 1] = Nd[i, N_MRZ] * dr_ + Nd[i, N_MZZ] * dz_ - dt * F[3 * i + 1]
-                    R[3 * i + 2] = Nd[i, N_MTT] * dt_ - dt * F[3 * i + 2]
-                for k in range(n):
-                    if fixed_dof(Nd, k) and not (body and k == rz):
-                        R[k] = 0.0
-                        gf[k] = 0.0
-                    else:
-                        gf[k] = gV[k]
-                if body:
-                    ab_, thr_, dr_b, ram_, pj_, po_, mb_ = body_terms(flags, st, Us, P)
-                    if flags & F_CODE:
-                        R[rz] = mb_ * (Us - U) / alpha - dt * (-ram_ + st[T_FRING])
-                    else:
-                        R[rz] = mb_ * (Us - U) / alpha - dt * (thr_ + dr_b - ram_ + st[T_FRING])
-                if rho_lam > 0.0:
-                    u_end = U + (Us - U) / alpha if body else 0.0
-                    q_flow_end = end_of_step_flow(
-                        Nd, qn, vn, vs, Us, u_end, dt, alpha, q_end, g_end, v1
-                    )
-                    if deforming:
-                        lam_end = inertance(q_end, n1, g_lam)
-                    if deforming:
-                        imp = P[P_RHO] * (lam_end * q_flow_end - lam_start * q_start)
-                        rho_lam_now = P[P_RHO] * lam_end
-                    else:
-                        imp = rho_lam * (q_flow_end - q_start)
-                    for k in range(n):
-                        R[k] += imp * gf[k]  # the vehicle's row too: it carries the frame
-                    if rho_s > 0.0 and body:
-                        # Lagrange's equation of the cross term rho S U Q: the wall feels the
-                        # uniform pressure -rho S U', the vehicle -rho S Q'
-                        # (docs/theory/shell.md)
-                        du_ = (Us - U) / alpha
-                        for k in range(n):
-                            R[k] += rho_s * du_ * gf[k]
-                        R[rz] += rho_s * (q_flow_end - q_start)
-                    if deforming:
-                        # the wall feels +1/2 rho Q^2 grad Lambda (the residual's -dt ...): the
-                        # flowing water pulls a narrow section narrower, the -1/2 rho u^2 of
-                        # Bernoulli (docs/validation/papers.md)
-                        inertance(q1, n1, g_lam)
-                        q_mid = st[T_VDOT]  # forces() took grad V . v_rel at (q*, v*) above
-                        for k in range(n):
-                            if not fixed_dof(Nd, k) or (body and k == rz):
-                                R[k] -= dt * 0.5 * P[P_RHO] * q_mid * q_mid * g_lam[k]
-                if ring_kappa > 0.0:
-                    # pinch-off within the step: its share before T* = F, from the midpoint's
-                    # volume rate (forces() above), as the formation time's own update
-                    ring_share = sj.pinch_off_share(
-                        ring_t0, st[T_VDOT], st[T_AOUT], dt, P[P_FORMATION_NUMBER]
-                    )
-                    ring_j, ring_rise, ring_q1 = starting_jet_impulse(
-                        Nd, qn, vn, vs, Us, U, body, dt, alpha, q_end, g_end, v1, ring_kappa,
-                        ring_peak, ring_crossing, ring_share, ring_last_rise,
-                    )
-                    for k in range(n):
-                        R[k] += ring_j * gf[k]
-                    if body:
-                        R[rz] += ring_area * ring_j  # the thrust A p_ex on the vehicle
-                state[tail + S_NIT] += 1.0
-                # backtracking line search on |R|: halve a Newton step that increased the residual
-                rnorm = 0.0
-                for k in range(n):
-                    rnorm += R[k] * R[k]
-                if not math.isfinite(rnorm):
-                    rnorm = 1e300
-                if rnorm > rprev and lam > 1.0 / 64.0:
-                    lam *= 0.5
-                    for k in range(n):
-                        vs[k] += lam * dv[k]
-                    continue
-                if rnorm > rprev and not fresh:
-                    have_lu = False  # even short steps fail: the Jacobian is stale
-                rprev = rnorm
-                lam = 1.0
-                if have_lu and (flags & F_JET) and (flags & F_CODE):
-                    # rank one of the wall-borne thrust / refill force: dF = w (dT/dV') g^T
-                    Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
-                    pcoef = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
-                    band_solve(J, n, BW, wz, zz)
-                elif have_lu and (((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0):
-                    # refresh the rank-one pressure correction for the reused factorisation
-                    # the starting jet's inertia (none in the step crossing pinch-off: its
-                    # impulse there follows the previous step's rate, not the unknowns)
-                    ring_c = ring_kappa if ring_j < 0.0 and not ring_crossing else 0.0
-                    pcoef = rank_one_coefficient(flags, st, P, dt, (rho_lam_now + ring_c) / alpha)
-                    band_solve(J, n, BW, gf, zz)
-                if not have_lu:
-                    fresh = True
-                    state[tail + S_NJAC] += 1.0
-                    assemble_KC(flags, q1, vrel, Us, ts, E, Nd, P, K, C)
-                    for k in range(n):
-                        for j in range(2 * BW + 1):
-                            J[k, j] = -dt * (alpha * dt * K[k, j] + C[k, j])
-                    for i in range(n1):
-                        J[3 * i, BW] += Nd[i, N_MRR] / alpha
-                        J[3 * i, BW + 1] += Nd[i, N_MRZ] / alpha
-                        J[3 * i + 1, BW - 1] += Nd[i, N_MRZ] / alpha
-                        J[3 * i + 1, BW] += Nd[i, N_MZZ] / alpha
-                        J[3 * i + 2, BW] += Nd[i, N_MTT] / alpha
-                    if body and (flags & F_CODE):
-                        # the pole slot carries the vehicle: its mass and the d/dU of ram (the
-                        # drag's d/dU acts on every wall node: left to the Newton iteration)
-                        J[rz, BW] += (mb_ - Nd[(rz - 1) // 3, N_MZZ]) / alpha
-                        if flags & F_JET:
-                            J[rz, BW] += dt * P[P_RHO] * max(st[T_VDOT], 0.0)
-                    elif body:
-                        # the ring slot carries the vehicle: its mass and the d/dU of drag and ram
-                        J[rz, BW] += (mb_ - Nd[n1 - 1, N_MZZ]) / alpha
-                        if flags & F_DRAG:
-                            J[rz, BW] += (
-                                dt
-                                * P[P_CD]
-                                * P[P_RHO]
-                                * math.pi
-                                * st[T_RMAX]
-                                * st[T_RMAX]
-                                * abs(Us)
-                            )
-                        if flags & F_JET:
-                            J[rz, BW] += dt * P[P_RHO] * max(st[T_VDOT], 0.0)
-                    for k in range(n):
-                        if fixed_dof(Nd, k) and not (body and k == rz):
-                            for j in range(2 * BW + 1):
-                                J[k, j] = 0.0
-                                kk = k + j - BW
-                                if 0 <= kk < n:
-                                    J[kk, k - kk + BW] = 0.0
-                            J[k, BW] = 1.0
-                    if not band_lu(J, n, BW):
-                        return step, ERR_NEWTON
-                    if rho_s > 0.0 and body:
-                        e_u[rz] = 1.0
-                        band_solve(J, n, BW, e_u, ze)
-                    # pressure rank one: + dt rho |V'|/A^2 g g^T
-                    pcoef = 0.0
-                    if (flags & F_JET) and (flags & F_CODE):
-                        Aj = st[T_AOUT] if st[T_VDOT] < 0 else P[P_AIN]
-                        pcoef = dt * 2.0 * P[P_CF] * P[P_RHO] * abs(st[T_VDOT]) / Aj
-                        band_solve(J, n, BW, wz, zz)
-                    elif ((flags & F_JET) and not (flags & F_PAPER)) or rho_lam > 0.0:
-                        ring_c = ring_kappa if ring_j < 0.0 and not ring_crossing else 0.0
-                        pcoef = rank_one_coefficient(
-                            flags, st, P, dt, (rho_lam_now + ring_c) / alpha
-                        )
-                        band_solve(J, n, BW, gf, zz)
-                    have_lu = True
-                band_solve(J, n, BW, R, dv)
-                if rho_s > 0.0 and body:
-                    _rank_three_correction(dv, gf, zz, ze, rz, pcoef, rho_s / alpha, n)
-                elif pcoef > 0.0:
-                    gy = 0.0
-                    gz = 0.0
-                    for k in range(n):
-                        gy += gf[k] * dv[k]
-                        gz += gf[k] * zz[k]
-                    fac = pcoef * gy / (1.0 + pcoef * gz)
-                    for k in range(n):
-                        dv[k] -= fac * zz[k]
-                dmax = 0.0
-                vmax = 0.0
-                dsum = 0.0
-                for k in range(n):
-                    vs[k] -= dv[k]
-                    dsum += dv[k]
-                    if abs(dv[k]) > dmax:
-                        dmax = abs(dv[k])
-                    if abs(vs[k]) > vmax:
-                        vmax = abs(vs[k])
-                if not (math.isfinite(dsum) and math.isfinite(vmax)) or vmax > P[P_VLIM]:
-                    return step, ERR_NEWTON
-                if dmax <= P[P_TOL] * (vmax + P[P_VSCALE]):
-                    converged = True
-                    break
-                if (dmax > 0.3 * prev or it >= 6) and not fresh:
-                    have_lu = False  # slow contraction: refresh the Jacobian
-                prev = dmax
-            if not converged:
-                return step, ERR_NEWTON
-            if body:
-                Us = vs[rz]
-            for i in range(n1):
-                q1[3 * i] = qn[3 * i] + alpha * dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
-                q1[3 * i + 1] = qn[3 * i + 1] + alpha * dt * (vs[3 * i + 1] - Us) * (
-                    1.0 - Nd[i, N_FIXZ]
-                )
-                q1[3 * i + 2] = qn[3 * i + 2] + alpha * dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
-            forces(flags, q1, vs, Us, ts, amp_cmd, E, Nd, P, F, gV, vrel, st)
-            Ush = Us  # the frame speed the shell's kinematics use (0 in the paper coupling)
-            if flags & F_PAPER:
-                imp_mom = 0.0
-                if rho_s > 0.0:
-                    # the water inside's momentum changes by rho S (Q_end - Q_start)
-                    # over the step, Q relative to the body (the frame the paper's shell lives in)
-                    q_end_flow = end_of_step_flow(
-                        Nd, qn, vn, vs, 0.0, 0.0, dt, alpha, q_end, g_end, v1
-                    )
-                    imp_mom = rho_s * (q_end_flow - q_start)
-                if flags & F_BODY:
-                    Us = _paper_vehicle_midpoint(flags, st, U, alpha, dt, P, imp_mom)
-                    # no wall force reacts to it (the shell has no frame forces here): its work
-                    # on the vehicle is created or destroyed (docs/theory/shell.md)
-                    state[tail + S_CREATED_MOM] -= imp_mom * Us
-                acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
-                # what the consistent wall pressure would have charged the shell for the outflow:
-                # the jet's kinetic energy flux in the body frame, 1/2 rho A u^3
-                # (docs/theory/shell.md, "The ledger of the paper coupling").  On inflow nothing
-                # is created: no suction acts on the wall and the inflow jet's kinetic energy is
-                # not booked out either
-                if (flags & F_JET) and st[T_VDOT] < 0.0:
-                    uj_ = -st[T_VDOT] / st[T_AOUT]
-                    state[tail + S_CREATED] += dt * 0.5 * P[P_RHO] * st[T_AOUT] * uj_ * uj_ * uj_
-                elif flags & F_JET:
-                    uin_ = st[T_VDOT] / P[P_AIN]
-                    po -= 0.5 * P[P_RHO] * P[P_AIN] * uin_ * uin_ * uin_
-            else:
-                acc_b, thr, dr, ram, pj, po, mb = body_terms(flags, st, Us, P)
-                if ring_kappa > 0.0:
-                    # the converged step's exit over-pressure: on the vehicle A p_ex, and its work
-                    # A p_ex (u_j - U) out with the jet (the wall paid A p_ex u_j through grad V)
-                    # (midpoint quantities: the ledger keeps the integrator's closure order)
-                    ring_share = sj.pinch_off_share(
-                        ring_t0, st[T_VDOT], st[T_AOUT], dt, P[P_FORMATION_NUMBER]
-                    )
-                    ring_j, ring_rise, ring_q1 = starting_jet_impulse(
-                        Nd, qn, vn, vs, Us, U, body, dt, alpha, q_end, g_end, v1, ring_kappa,
-                        ring_peak, ring_crossing, ring_share, ring_last_rise,
-                    )
-                    ring_pex = -ring_j / dt
-                    ring_out = ring_j * (st[T_VDOT] + ring_area * (Us if body else 0.0)) / dt
-                    thr += ring_area * ring_pex
-                    if body:
-                        acc_b += ring_area * ring_pex / mb
-                    pj += ring_out
-                    state[tail + S_OVERPRESSURE_WORK] += dt * ring_out
-                if flags & F_CODE:
-                    # as in the paper coupling no cavity pressure pays for the jet; and the thrust,
-                    # the refill force and the drag work at the wall's speed, not the vehicle's
-                    # (docs/validation/papers.md)
-                    if (flags & F_JET) and st[T_VDOT] < 0.0:
-                        uj_ = -st[T_VDOT] / st[T_AOUT]
-                        state[tail + S_CREATED] += (
-                            dt * 0.5 * P[P_RHO] * st[T_AOUT] * uj_ * uj_ * uj_
-                        )
-                    elif flags & F_JET:
-                        uin_ = st[T_VDOT] / P[P_AIN]
-                        po -= 0.5 * P[P_RHO] * P[P_AIN] * uin_ * uin_ * uin_
-                    state[tail + S_CREATED_WALL] += dt * (
-                        (thr + dr) * st[T_WREL] + st[T_FREF] * (Us + st[T_WREL])
-                    )
-            for i in range(n1):
-                q1[3 * i] = qn[3 * i] + dt * vs[3 * i] * (1.0 - Nd[i, N_FIXR])
-                q1[3 * i + 1] = qn[3 * i + 1] + dt * (vs[3 * i + 1] - Ush) * (1.0 - Nd[i, N_FIXZ])
-                q1[3 * i + 2] = qn[3 * i + 2] + dt * vs[3 * i + 2] * (1.0 - Nd[i, N_FIXT])
-            for k in range(n):
-                v1[k] = 0.0 if fixed_dof(Nd, k) else vn[k] + (vs[k] - vn[k]) / alpha
-            U1 = U + (Us - U) / alpha
-            Uh = Us
-            code = _check(q1, v1, n1, P)
-            if code != OK:
-                return step, code
-            if deforming and folded(q1, n1):
-                # the section is no longer a function of z: the 1-D internal flow is undefined
-                return step, ERR_FOLD
-            state[tail + S_IN] += dt * st[T_PACT]
-            state[tail + S_VISC] += dt * st[T_PVISC]
-            state[tail + S_DRAG] += dt * (st[T_PDRAG] - dr * Us)
-            state[tail + S_JET] += dt * pj
-            state[tail + S_OTHER] += dt * (po + st[T_PCONT])
-            pres, vol, vdot = st[T_P], st[T_VOL], st[T_VDOT]
-            if P[P_FORMATION_NUMBER] > 0.0:
-                pres += ring_pex
-                # the pulse's running peak (kept past pinch-off: ring_q1 = 0 there), reset with T*
-                state[tail + S_PEAK_OUTFLOW] = sj.next_peak_outflow(
-                    ring_peak, vdot, ring_q1, ring_rise
-                )
-                state[tail + S_LAST_RISE] = ring_rise
-                state[tail + S_FORMATION_TIME] = sj.next_formation_time(
-                    state[tail + S_FORMATION_TIME], vdot, st[T_AOUT], dt
-                )
-        if not (flags & F_BODY):
-            U1 = 0.0
-            Uh = 0.0
-            acc_b = 0.0
-        for k in range(n):
-            state[k] = q1[k]
-            state[n + k] = v1[k]
-        state[tail + S_X] = x + dt * Uh
-        state[tail + S_U] = U1
-        state[tail + S_A] = acc_b
-        state[tail + S_THR] = thr
-        state[tail + S_BDRAG] = dr
-        state[tail + S_P] = pres
-        state[tail + S_VOL] = vol
-        state[tail + S_VDOT] = vdot
-        state[tail + S_TIME] = t + dt
-        if flags & F_JET:
-            state[tail + S_UJ] = -vdot / (st[T_AOUT] if vdot < 0 else P[P_AIN])
+            code, U1, Uh, acc_b, thr, dr, pres, vol, vdot, have_lu = implicit_step(
+                flags, state, qn, vn, U, t, amp_cmd, E, Nd, P, body, rz, have_lu, rho_lam,
+                deforming, rho_s, w, J, vprev, ze, ws,
+            )
+        if code != OK:
+            return step, code
+        commit_step(
+            flags, state, P, w.st, w.q1, w.v1, x, t, U1, Uh, acc_b, thr, dr, pres, vol, vdot
+        )
         ws[WS_HAVE_LU] = 1.0 if have_lu else 0.0
     return n_steps, OK
 
