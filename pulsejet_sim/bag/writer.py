@@ -659,12 +659,7 @@ class _FastChunk:
         """
         builder, stats, chunk_size = self.builder, self.stats, self.chunk_size
         # the statistics and chunk times add_message would leave after each message in turn
-        if stats.message_count == 0:
-            stats.message_start_time = log_time_ns
-        else:
-            stats.message_start_time = min(log_time_ns, stats.message_start_time)
-        stats.message_end_time = max(log_time_ns, stats.message_end_time)
-        stats.message_count += len(records)
+        _extend_statistics(stats, log_time_ns, log_time_ns, len(records))
         channel_counts = stats.channel_message_counts
         head = _MESSAGE_HEAD.pack
         i, n = 0, len(records)
@@ -715,13 +710,7 @@ class _FastChunk:
         builder, stats, chunk_size = self.builder, self.stats, self.chunk_size
         log_ns = merged.log_ns[part]
         sizes = merged.sizes[part] + _MESSAGE_HEAD.size
-        first, last = int(log_ns.min()), int(log_ns.max())
-        if stats.message_count == 0:
-            stats.message_start_time = first
-        else:
-            stats.message_start_time = min(first, stats.message_start_time)
-        stats.message_end_time = max(last, stats.message_end_time)
-        stats.message_count += len(log_ns)
+        _extend_statistics(stats, int(log_ns.min()), int(log_ns.max()), len(log_ns))
         # in order of first appearance: the summary's Statistics record lists them that way
         seen, firsts, counts = np.unique(channels, return_index=True, return_counts=True)
         for k in np.argsort(firsts):
@@ -769,6 +758,16 @@ class _FastChunk:
             i += m
             if ends[m - 1] > chunk_size:
                 self.finalize()
+
+
+def _extend_statistics(stats, first_ns: int, last_ns: int, count: int) -> None:
+    """Count `count` messages logged from first_ns to last_ns into mcap's Statistics record."""
+    if stats.message_count == 0:
+        stats.message_start_time = first_ns
+    else:
+        stats.message_start_time = min(first_ns, stats.message_start_time)
+    stats.message_end_time = max(last_ns, stats.message_end_time)
+    stats.message_count += count
 
 
 class _MessageIndex(MessageIndex):
