@@ -1,8 +1,8 @@
 """
 Fingerprint what the shell model builds from its scenes, to show a refactoring keeps every bit.
 
-    python scripts/shell_scene_bits.py --write BASE.json   # record (before the change)
-    python scripts/shell_scene_bits.py --check BASE.json   # compare (after): 1 on a difference
+    .venv/bin/python scripts/shell_scene_bits.py --write BASE.json   # record (before the change)
+    .venv/bin/python scripts/shell_scene_bits.py --check BASE.json   # compare (after): 1 on a diff
 
 For every shipped shell scene (config/*.yaml with ``model: shell``), every validation case
 (validation/cases/) on a shell scene with its overrides and its probes' overrides, and a set of
@@ -23,14 +23,12 @@ from pathlib import Path
 import sys
 
 import numpy as np
+from pulsejet_sim.core.schema import read_yaml_file
+from pulsejet_sim.engine.simulation import Simulation
+from pulsejet_sim.scene import load_scene, SceneError
+from pulsejet_sim.scene.loader import merge
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from pulsejet_sim.core.schema import read_yaml_file  # noqa: E402
-from pulsejet_sim.engine.simulation import Simulation  # noqa: E402
-from pulsejet_sim.scene import load_scene, SceneError  # noqa: E402
-from pulsejet_sim.scene.loader import merge  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent  # the venv's editable install imports the package
 
 STEP_S = 1.0
 MAX_STEPS = 2000  # the verlet variants' tiny steps: a bounded number of them
@@ -184,8 +182,11 @@ def _scene(name, overrides, command_driven=False):
     for key, value in overrides.items():
         if value is None:
             data.pop(key, None)
-    path = Path('/tmp') / f'shell_scene_bits_{name}.yaml'
+    import tempfile
+
     import yaml
+
+    path = Path(tempfile.gettempdir()) / f'shell_scene_bits_{name}.yaml'
 
     path.write_text(yaml.safe_dump(data))
     return load_scene(path, command_driven=command_driven)
