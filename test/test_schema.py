@@ -1,6 +1,7 @@
 """core.schema: the one number rule every input reader applies, and its three wordings."""
 
 import argparse
+from pathlib import Path
 
 from pulsejet_sim.core.model_io import ModelError
 from pulsejet_sim.core.schema import Flag, mapping, Number, NumberRejected
@@ -63,3 +64,26 @@ def test_flags_and_mappings():
     assert mapping(None, 'options', 'a, b') == {}
     with pytest.raises(ModelError, match=r'^options: 3 is not a mapping; allowed: a, b$'):
         mapping(3, 'options', 'a, b')
+
+
+def test_exponents_without_a_dot_or_sign_are_numbers_quoted_text_stays_text(tmp_path):
+    """YAML 1.1 read 1e-3 and 4.0e4 as text; the scene reader takes them as YAML 1.2 does."""
+    from pulsejet_sim.core.schema import safe_load_yaml
+    from pulsejet_sim.scene import load_scene
+
+    data = safe_load_yaml(
+        "a: 1e-3\nb: 4.0e4\nc: -2E+5\nd: .5e3\ne: 10\nf: '1e-3'\ng: 1e3x\nh: 1.5", 'test'
+    )
+    assert data == {
+        'a': 0.001, 'b': 40000.0, 'c': -200000.0, 'd': 500.0, 'e': 10, 'f': '1e-3',
+        'g': '1e3x', 'h': 1.5,
+    }
+    assert type(data['e']) is int
+    # a lumped scene written with 1e-3 loads (its number rule refused the text '1e-3')
+    text = Path(__file__).resolve().parents[1].joinpath('config', 'pump_cycle.yaml').read_text()
+    assert 'viscosity_pa_s: 1.0e-3' in text
+    scene = tmp_path / 'pump_cycle_exponent.yaml'
+    scene.write_text(text.replace('viscosity_pa_s: 1.0e-3', 'viscosity_pa_s: 1e-3'))
+    assert load_scene(str(scene)).data['fluid']['viscosity_pa_s'] == 0.001
+    with pytest.raises(Exception, match="'1e-3' is not a number"):
+        load_scene('pump_cycle', overrides={'fluid': {'viscosity_pa_s': '1e-3'}})

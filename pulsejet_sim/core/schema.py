@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import re
 import reprlib
 from typing import Any, Mapping
 
@@ -102,11 +103,29 @@ def _check_graph(root: yaml.Node, what: str) -> None:
                 stack.append((child, depth + 1, False))
 
 
+class _SafeLoader(yaml.SafeLoader):
+    """
+    yaml.SafeLoader that also reads ``1e-3``, ``4e4`` and ``4.0e4`` as numbers.
+
+    PyYAML follows YAML 1.1, whose floats need a dot and a signed exponent, so an unquoted ``1e-3``
+    or ``4.0e4`` was text ('1e-3' was refused as "not a number" by the lumped model's number
+    rule; the shell converted it); YAML 1.2, and other readers of a scene file, read them as
+    numbers. Plain integers stay integers (their resolver comes first) and quoted text stays text.
+    """
+
+
+_SafeLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$'),
+    list('-+0123456789.'),
+)
+
+
 def safe_load_yaml(text: str | bytes, what: str) -> Any:
     """
-    Parse one YAML document with yaml.SafeLoader and the limits above.
+    Parse one YAML document with the safe loader (exponents without a dot are numbers too).
 
-    YAMLInputError names `what`.
+    The limits above apply; YAMLInputError names `what`.
     """
     if isinstance(text, bytes):
         if len(text) > MAX_YAML_BYTES:
@@ -126,7 +145,7 @@ def safe_load_yaml(text: str | bytes, what: str) -> Any:
             f'{what}: {len(text)} characters; allowed: at most {MAX_YAML_BYTES} of YAML'
         )
     try:
-        loader = yaml.SafeLoader(text)
+        loader = _SafeLoader(text)
     except yaml.YAMLError as err:  # the reader refuses control characters up front
         detail = ' '.join(str(err).split())
         raise YAMLInputError(
