@@ -59,9 +59,6 @@ class RecordBatch:
         if count:
             self.blocks.append(Block(topic, keys, log_ns, rows))
 
-    def __len__(self) -> int:
-        return sum(len(b.keys) for b in self.blocks)
-
     def merged(self) -> 'Merged':
         """Return the batch in write order."""
         if not self.blocks:

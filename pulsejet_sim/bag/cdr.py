@@ -328,6 +328,15 @@ class ColumnEncoder:
         self._vector6_x = len(self._vector6) - 6 * 8
         self._odometry_x = len(self._odometry) - 85 * 8
         self._odometry_vx = self._odometry_x + 43 * 8
+        names = APPLIED_COMMAND_NAMES
+        self._joint_state = enc.joint_state(names, (0.0,) * len(names), 0)
+        # positions follow the header, the names and the count, 8-aligned (as _Writer lays out)
+        w = _Writer()
+        w.header(0, enc.frame_id)
+        w.string_sequence(names)
+        w.pack('I', 4, len(names))
+        w.align(8)
+        self._joint_state_positions = len(w.buf)
 
     def float64(self, values: np.ndarray) -> np.ndarray:
         """Return std_msgs/Float64 rows."""
@@ -376,16 +385,8 @@ class ColumnEncoder:
 
     def applied_commands(self, ns: np.ndarray, values: np.ndarray) -> np.ndarray:
         """Return sensor_msgs/JointState rows of held commands (TopicEncoder.applied_command)."""
-        names = APPLIED_COMMAND_NAMES
-        template = self.encoder.joint_state(names, (0.0,) * len(names), 0)
-        # positions follow the header, the names and the count, 8-aligned (as _Writer lays out)
-        w = _Writer()
-        w.header(0, self.encoder.frame_id)
-        w.string_sequence(names)
-        w.pack('I', 4, len(names))
-        w.align(8)
-        rows = _stamped(template, ns)
-        _put(rows, len(w.buf), '<f8', values)
+        rows = _stamped(self._joint_state, ns)
+        _put(rows, self._joint_state_positions, '<f8', values)
         return rows
 
     def profiles(self, ns: np.ndarray, r_m: np.ndarray, z_m: np.ndarray) -> np.ndarray:
