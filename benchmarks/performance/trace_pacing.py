@@ -59,6 +59,7 @@ def install(records: list) -> None:
     gc.callbacks.append(on_gc)
 
     class TracedEvent(threading.Event):
+
         def wait(self, timeout=None):
             t0 = mono()
             woken = super().wait(timeout)
@@ -172,12 +173,28 @@ def analyse(records: list, period_s: float, window=None) -> str:
     )
     wake_late = waits[:, 1] - waits[:, 0] - waits[:, 2]
     lines.append(f'pacing wait returns late by: {pct(wake_late)} ({len(waits)} timed-out waits)')
-    for kind in ('outbox put', 'outbox send', 'physics', 'emit', 'diagnostics', 'health', 'energy_ledger', 'marker',
-                 'spin_once', 'gc', 'accept'):
+    for kind in ('outbox put', 'outbox send', 'physics', 'emit', 'diagnostics', 'health',
+                 'energy_ledger', 'marker', 'spin_once', 'gc', 'accept'):
         spans = np.array([(t0, t1) for t0, t1, _ in by_kind[kind]])
         if spans.size:
             d = spans[:, 1] - spans[:, 0]
             lines.append(f'{kind}: {len(d)} calls, duration {pct(d)}')
+    # where in the publication period each kind of work starts (ms after the pacer's grid
+    # point): a kind at a fixed phase meets the sends every time or never
+    lines.append(f'send (/clock) phase in the period: p5 / p50 / p95'
+                 f' {" / ".join(f"{v:.2f}" for v in np.percentile(lateness * 1e3, [5, 50, 95]))}'
+                 ' ms')
+    for kind in ('health', 'diagnostics', 'marker', 'spin_once'):
+        starts = np.array([t0 for t0, _, _ in by_kind[kind]])
+        if window is not None and starts.size:
+            starts = starts[(starts >= window[0]) & (starts <= window[1])]
+        if starts.size:
+            phase = ((starts - grid_t0) / grid_dt % 1.0) * grid_dt * 1e3
+            lines.append(
+                f'{kind} start phase in the period: p5 / p50 / p95'
+                f' {" / ".join(f"{v:.2f}" for v in np.percentile(phase, [5, 50, 95]))} ms'
+                f' ({starts.size} starts)'
+            )
     gens = collections.Counter(ex for _, _, ex in by_kind['gc'])
     lines.append(f'gc passes by generation: {dict(gens)}')
     # decompose each send: the wait before it, the tick's start, its physics, /clock's call
@@ -214,8 +231,10 @@ def analyse(records: list, period_s: float, window=None) -> str:
     lines.append('')
     lines.append(f'the {len(worst)} latest sends (lateness, decomposition, events in the'
                  ' 12 ms before, ms relative to the send):')
-    spans = {kind: np.array([(t0, t1) for t0, t1, _ in by_kind[kind]]) for kind in
-             ('diagnostics', 'marker', 'spin_once', 'gc', 'energy_ledger', 'accept')}
+    spans = {
+        kind: np.array([(t0, t1) for t0, t1, _ in by_kind[kind]])
+        for kind in ('health', 'marker', 'spin_once', 'gc', 'energy_ledger', 'accept')
+    }
     spans['other publish'] = pub_other
     counts = collections.Counter()
     base = collections.Counter()
