@@ -171,9 +171,10 @@ class StatePublisher:
 
         sent_at_once: the caller runs the calls before the simulation moves on (no lookahead, no
         publish delay); the energy ledger and the Marker of a ledger state are then built by a
-        call after /clock's instead of here, so their cost (0.35 ms median at 5 Hz on the shell
-        scene, benchmarks/results/pacing_trace.md) is not in the time from the state's wake-up to
-        its /clock. Same messages: the simulation still holds this state when they are built.
+        call after /clock's instead of here, so their cost (the Marker's build 0.8 ms and the
+        ledger's 0.1 ms median on the shell scene, benchmarks/results/pacing_trace.md) is not in
+        the time from the state's wake-up to its /clock. Same messages: the simulation still holds
+        this state when they are built.
         """
         if not observation_is_finite(obs):
             return []
