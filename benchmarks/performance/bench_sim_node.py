@@ -62,6 +62,8 @@ def run(
     lookahead_s: float = 0.0,
     subscribe_marker: bool = False,
     publish_delay_periods: float | None = None,
+    sim_module: str = 'pulsejet_sim.ros.sim_node',
+    sim_module_args: tuple = (),
 ) -> dict:
     """
     Measure one live run of sim_node (see the module docstring); returns the figures.
@@ -70,6 +72,8 @@ def run(
     (reliable), taking the serialised bytes (raw) so this process's own decoding does not load
     the cores sim_node runs on; the markers received are counted.
     publish_delay_periods: sim_node's parameter of that name (None: its default).
+    sim_module, sim_module_args: the module run as sim_node and its own arguments (trace_pacing.py
+    runs sim_node with its timestamps).
     """
     from pulsejet_sim.ros.executor import make_executor
     from pulsejet_sim.scene import load_scene
@@ -86,7 +90,8 @@ def run(
     sim_cmd = [
         sys.executable,
         '-m',
-        'pulsejet_sim.ros.sim_node',
+        sim_module,
+        *sim_module_args,
         '--ros-args',
         '-p',
         f'scene:={scene}',

@@ -25,6 +25,7 @@ scene or parameter.
 
 from __future__ import annotations
 
+import functools
 import signal
 import sys
 import time
@@ -49,6 +50,8 @@ GIL_SWITCH_INTERVAL_S = 2e-4
 #: counted (commands_rejected in /diagnostics) and summed up in the next warning
 REJECTION_LOG_BURST = 10
 REJECTION_LOG_RATE_HZ = 2.0
+#: the event _tick adds when /diagnostics is due (sim_node's own; the session never sees it)
+DIAGNOSTICS_DUE = object()
 
 
 class SimNode(Node):
@@ -104,7 +107,12 @@ class SimNode(Node):
         self.create_service(Trigger, messages.SERVICE_RESET, self._on_reset)
         self.wait_started = time.monotonic()
         self._waiting_published = False
-        self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
+        # /diagnostics is published by the pacing thread right after a tick's sends (see _tick),
+        # not by an rclpy timer: a timer of a whole number of publication periods fires at the
+        # same phase of the send grid all run long, and where that phase met the send time it
+        # delayed one send in a hundred (at 1 Hz and 100 Hz) by the diagnostics' 0.5 ms
+        self._diagnostics_period_s = p['diagnostics_period_s']
+        self._next_diagnostics = None
         self._ready = True
         self.get_logger().info(
             f'scene {self.scene.name!r} ({sim.model.name} model, dt {sim.model.dt_s:g} s), '
@@ -154,6 +162,16 @@ class SimNode(Node):
 
     # -- pacing thread (LiveLoop) ---------------------------------------------------------------
     def _tick(self, now: float) -> list:
+        events = self._session_tick(now)
+        if self._next_diagnostics is None:
+            self._next_diagnostics = now + self._diagnostics_period_s
+        elif now >= self._next_diagnostics:
+            # after the tick's states: their sends come first (_emit_events)
+            self._next_diagnostics = max(self._next_diagnostics + self._diagnostics_period_s, now)
+            events.append(DIAGNOSTICS_DUE)
+        return events
+
+    def _session_tick(self, now: float) -> list:
         s = self.session
         if s.started:
             return s.tick(now)
@@ -209,8 +227,9 @@ class SimNode(Node):
         log = self.get_logger()
         for e in events:
             if isinstance(e, eng.Publish):
-                calls = self.out.state(e.observation, e.ledger)
-                if e.due_wall is not None and e.due_wall > time.monotonic():
+                ahead = e.due_wall is not None and e.due_wall > time.monotonic()
+                calls = self.out.state(e.observation, e.ledger, sent_at_once=not ahead)
+                if ahead:
                     # computed ahead of its send time: the outbox sends it then
                     self._outbox.put(e.due_wall, calls)
                     self._outbox_due = e.due_wall
@@ -234,6 +253,14 @@ class SimNode(Node):
             elif isinstance(e, eng.Halted):
                 self._outbox.flush()
                 self._publish_diagnostics()
+            elif e is DIAGNOSTICS_DUE:  # the pacing thread, holding the session
+                call = functools.partial(
+                    self._send_diagnostics, *self.session.health(time.monotonic())
+                )
+                if self._outbox.pending():  # right after the states it will send
+                    self._outbox.put(self._outbox_due, [call])
+                else:  # right after the states just sent
+                    call()
 
     def _on_failure(self, text):
         self.get_logger().error(text)
@@ -304,6 +331,9 @@ class SimNode(Node):
         # need the session
         with self.loop.locked():
             level, message, values = self.session.health(time.monotonic())
+        self._send_diagnostics(level, message, values)
+
+    def _send_diagnostics(self, level: str, message: str, values: dict) -> None:
         self.out.diagnostics(
             level, self.status_name, self.get_fully_qualified_name(), message, values
         )

@@ -165,8 +165,17 @@ class StatePublisher:
     def _call(self, topic: str, msg) -> Call:
         return functools.partial(self._pubs[topic].publish, msg)
 
-    def state(self, obs, ledger: bool = False) -> list[Call]:
-        """Return the publish calls of one state; none for a non-finite one (never NaN)."""
+    def state(self, obs, ledger: bool = False, sent_at_once: bool = False) -> list[Call]:
+        """
+        Return the publish calls of one state; none for a non-finite one (never NaN).
+
+        sent_at_once: the caller runs the calls before the simulation moves on (no lookahead, no
+        publish delay); the energy ledger and the Marker of a ledger state are then built by a
+        call after /clock's instead of here, so their cost (the Marker's build 0.8 ms and the
+        ledger's 0.1 ms median on the shell scene, benchmarks/results/pacing_trace.md) is not in
+        the time from the state's wake-up to its /clock. Same messages: the simulation still holds
+        this state when they are built.
+        """
         if not observation_is_finite(obs):
             return []
         calls = []
@@ -187,20 +196,33 @@ class StatePublisher:
                 odometry = messages.odometry_message(obs, *self.frames)
                 calls.append(self._call(TOPIC_TF, self._transform(odometry)))
         if ledger:
-            calls += self.ledger(obs.time_s)
-            marker = self._pubs.get(messages.TOPIC_MANTLE_MARKER)
-            # the 3-D view at the ledger's rate, in the body frame, and only while someone
-            # looks; serialised from arrays (its ~14000 points as Python objects held the
-            # interpreter ~15 ms) on the marker thread, handed over when the state is sent (so
-            # at its wall time with a lookahead), published as those bytes
-            if profile is not None and marker.get_subscription_count():
-                r_m, z_m = (np.array(a, dtype=np.float64) for a in profile)  # this state's
-                calls.append(
-                    functools.partial(
-                        self._marker_thread.submit,
-                        functools.partial(self._send_marker, marker, r_m, z_m, obs.time_s),
-                    )
+            if sent_at_once:
+                calls.append(functools.partial(self._ledger_extras, obs.time_s, profile))
+            else:
+                calls += self._ledger_extras_calls(obs.time_s, profile)
+        return calls
+
+    def _ledger_extras(self, time_s: float, profile) -> None:
+        """Build and send a ledger state's energy ledger and Marker (after its /clock)."""
+        for call in self._ledger_extras_calls(time_s, profile):
+            call()
+
+    def _ledger_extras_calls(self, time_s: float, profile) -> list[Call]:
+        """Return the calls of a ledger state's energy ledger and Marker, their values read now."""
+        calls = self.ledger(time_s)
+        marker = self._pubs.get(messages.TOPIC_MANTLE_MARKER)
+        # the 3-D view at the ledger's rate, in the body frame, and only while someone looks;
+        # serialised from arrays (its ~14000 points as Python objects held the interpreter ~15 ms)
+        # on the marker thread, handed over when the state is sent (so at its wall time with a
+        # lookahead), published as those bytes
+        if profile is not None and marker.get_subscription_count():
+            r_m, z_m = (np.array(a, dtype=np.float64) for a in profile)  # this state's
+            calls.append(
+                functools.partial(
+                    self._marker_thread.submit,
+                    functools.partial(self._send_marker, marker, r_m, z_m, time_s),
                 )
+            )
         return calls
 
     def _send_marker(self, publisher, r_m, z_m, time_s: float) -> None:
