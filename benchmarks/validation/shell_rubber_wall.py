@@ -96,8 +96,8 @@ def main() -> int:
         common.header('Shell robots with a neo-Hookean wall (a numerical experiment)',
                       'python -m benchmarks.validation.shell_rubber_wall').rstrip('\n'),
         '',
-        'Not a fitted change: the shipped scenes with only the wall\'s law switched, at the same '
-        'small-strain Young\'s modulus (neo_hookean: mu = E/3; linear nu = 0.49: the Poisson '
+        "Not a fitted change: the shipped scenes with only the wall's law switched, at the same "
+        "small-strain Young's modulus (neo_hookean: mu = E/3; linear nu = 0.49: the Poisson "
         'effect alone). Stretches over the whole run; speed and stroke over the last '
         f'{PERIODS} periods; "finer": the relative difference at twice the elements and half '
         'the step. Method: the docstring of benchmarks/validation/shell_rubber_wall.py.',
