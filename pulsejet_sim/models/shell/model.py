@@ -11,7 +11,9 @@ is cut into N equal elements; every node carries ``(r, z, theta)``; strains, the
 ``q = 2hG eta + 2h eta_v eta_dot``) and their discrete energy/dissipation are documented in
 shell/kernels.py.  Internal forces are exact gradients of the discrete elastic energy, the viscous
 ones come from a dissipation function, so the scheme conserves energy by construction when the
-viscosity and the fluid loads are off (tested).
+viscosity and the fluid loads are off (tested).  ``material.law: neo_hookean`` makes the membrane
+part an incompressible neo-Hookean sheet's (E = 3 mu, nu = 1/2 elsewhere; the muscle an active
+strain): docs/theory/shell_rubber.md.
 
 *Boundary conditions.*  Pole (node 0): ``r = 0`` and ``theta = theta0(0)`` (0 for a smooth pole),
 ``z`` free.  Ring (node N): clamped to the rigid cap/nozzle, which is part of the vehicle.
