@@ -14,11 +14,19 @@ before relying on a value). A one-point fit says nothing about the stiffening of
 at large stretch: the neo-Hookean law is the softest reading of each at large stretch. No
 Mooney-Rivlin (C1, C2) pair could be verified for these silicones, so none is tabled (give
 ``material.mooney_rivlin_c1_pa``/``_c2_pa`` explicitly), nor Sylgard 184 (no verified fit).
+
+The scene rules the lumped and the shell models share (one place for each): which material keys
+belong to which law (`refuse_keys_of_other_laws`) and how a neo-Hookean shear modulus is given
+(`neo_hookean_shear_modulus_pa`: a tabled ``silicone`` or ``shear_modulus_pa``, exactly one).
+The shell's law is in ``docs/theory/shell_rubber.md``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Mapping
+
+from pulsejet_sim.core.model_io import ModelError
 
 PSI_PA = 6894.757293168361  # Pa per psi (lbf/in^2)
 NEO_HOOKEAN_UNIAXIAL_AT_100_PERCENT = 2.0 - 1.0 / 4.0  # lambda - 1/lambda^2 at lambda = 2
@@ -53,6 +61,50 @@ SILICONES = {
         ('dragon_skin_30', 86.0),
     )
 }
+
+
+#: the values of ``material.silicone``: none, or a tabled silicone
+SILICONE_CHOICES = ('none', *SILICONES)
+
+
+def refuse_keys_of_other_laws(
+    given: Mapping[str, Any], law: str, law_keys: Mapping[str, tuple[str, ...]]
+) -> None:
+    """
+    Refuse a material key that belongs to another law than ``law`` (never ignore it).
+
+    ``law_keys`` maps each law to the keys it takes; ``silicone: none`` counts as not given.
+    Raises ModelError naming the key, the law and the keys of every law.
+    """
+    for key in sorted({k for keys in law_keys.values() for k in keys}):
+        if key in given and key not in law_keys[law]:
+            if key == 'silicone' and given[key] == 'none':
+                continue
+            takes = ', '.join(f'{name}: {", ".join(keys)}' for name, keys in law_keys.items())
+            raise ModelError(
+                f'material.{key}: given with material.law {law!r}, which does not use it; '
+                f'allowed: the keys of the law ({takes})'
+            )
+
+
+def neo_hookean_shear_modulus_pa(
+    given: Mapping[str, Any], silicone: str, shear_modulus_pa: float
+) -> float:
+    """
+    Return the neo-Hookean shear modulus mu, Pa: the tabled silicone's, or shear_modulus_pa.
+
+    ``given`` is the scene's material section as written (to tell a default from a value),
+    ``silicone`` and ``shear_modulus_pa`` the checked values. Exactly one of the two must be
+    given; otherwise ModelError names both and what is allowed.
+    """
+    tabled = silicone != 'none'
+    if tabled == ('shear_modulus_pa' in given):
+        raise ModelError(
+            f'material.law: neo_hookean needs exactly one of material.silicone (one of '
+            f'{", ".join(SILICONES)}) or material.shear_modulus_pa (Pa); given '
+            f'{"both" if tabled else "neither"}'
+        )
+    return SILICONES[silicone].shear_modulus_pa if tabled else float(shear_modulus_pa)
 
 
 def spherical_balloon_pressure_pa(

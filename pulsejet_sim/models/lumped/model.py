@@ -25,7 +25,11 @@ from pulsejet_sim.core.model_io import (
 )
 from pulsejet_sim.core.schema import check_section, Choice, Flag, Number
 from pulsejet_sim.models.lumped import kernels as K
-from pulsejet_sim.models.rubber import SILICONES
+from pulsejet_sim.models.rubber import (
+    neo_hookean_shear_modulus_pa,
+    refuse_keys_of_other_laws,
+    SILICONE_CHOICES,
+)
 from scipy import integrate
 
 TERM_BITS = {
@@ -69,7 +73,7 @@ MATERIAL_SPEC = {
     'law': Choice('linear', SHELL_LAWS),
     'stiffness_n_m': Number(None, 0.0, 1e9, low_open=True, unit='N/m'),
     # neo_hookean: a tabled silicone (models/rubber.py, with its source) or mu itself
-    'silicone': Choice('none', ('none', *SILICONES)),
+    'silicone': Choice('none', SILICONE_CHOICES),
     'shear_modulus_pa': Number(0.0, 0.0, 1e10, low_open=True, unit='Pa'),
     # mooney_rivlin: W = C1 (I1 - 3) + C2 (I2 - 3)
     'mooney_rivlin_c1_pa': Number(0.0, 0.0, 1e10, low_open=True, unit='Pa'),
@@ -163,26 +167,11 @@ def check_material(given: Any) -> tuple[dict[str, Any], float, float]:
         spec = {**MATERIAL_SPEC, 'stiffness_n_m': Number(0.0, 0.0, 1e9, unit='N/m')}
     m = check_section('material', given, spec)
     given = given or {}
-    for key in sorted({k for keys in _LAW_KEYS.values() for k in keys}):
-        if key in given and key not in _LAW_KEYS[law]:
-            if key == 'silicone' and given[key] == 'none':
-                continue
-            takes = ', '.join(f'{name}: {", ".join(keys)}' for name, keys in _LAW_KEYS.items())
-            raise ModelError(
-                f'material.{key}: given with material.law {law!r}, which does not use it; '
-                f'allowed: the keys of the law ({takes})'
-            )
+    refuse_keys_of_other_laws(given, law, _LAW_KEYS)
     if law == 'linear':
         return m, 0.0, 0.0
     if law == 'neo_hookean':
-        tabled = m['silicone'] != 'none'
-        if tabled == ('shear_modulus_pa' in given):
-            raise ModelError(
-                f'material.law: neo_hookean needs exactly one of material.silicone (one of '
-                f'{", ".join(SILICONES)}) or material.shear_modulus_pa (Pa); given '
-                f'{"both" if tabled else "neither"}'
-            )
-        mu = SILICONES[m['silicone']].shear_modulus_pa if tabled else m['shear_modulus_pa']
+        mu = neo_hookean_shear_modulus_pa(given, m['silicone'], m['shear_modulus_pa'])
         return m, 0.5 * mu, 0.0
     if 'mooney_rivlin_c1_pa' not in given:
         raise ModelError(

@@ -27,6 +27,10 @@ Stored energy (Kelvin-Voigt elastic part, h the half-thickness, A_e = 2 pi r0_m 
                 + G_s/2 gamma^2 ]
     Psi = 2 E h/(1-nu^2),  Js = h^2/3,  G_s = 2 h G,  G = E/(2(1+nu))
 
+With ``material.law: neo_hookean`` (flag F_NEO_HOOKEAN) the membrane term ``Psi/2 (..e..)`` is
+replaced by an incompressible neo-Hookean sheet's energy (``neo_hookean_membrane``;
+docs/theory/shell_rubber.md).
+
 Internal forces are exactly ``-dW/dq = -B^T sigma`` (B = d strain / dq), so without viscosity
 and fluid loads the semi-discrete system is Hamiltonian.  The Kelvin-Voigt viscous forces come
 from the dissipation function ``D = A_e [Psi2/2 (.. rates ..) + Js Psi2/2 (..) + G_v/2
@@ -71,6 +75,10 @@ F_EDGE = 256
 # uniform axial load per reference area; the vehicle (consistent frame, monolithic) feels them
 # through the clamped pole's axial reaction
 F_CODE = 512
+# material.law neo_hookean: the membrane part of the element energy is an incompressible
+# neo-Hookean sheet's (element_force; docs/theory/shell_rubber.md), bending and transverse shear
+# keep the linear terms with nu = 1/2 (P_NU), so mu h = Psi/8 (Psi = 2 E h/(1 - nu^2), E = 3 mu)
+F_NEO_HOOKEAN = 1024
 
 # ---- parameter vector P ---------------------------------------------------------------------
 P_PSI, P_PSI2, P_JS, P_GS, P_GV, P_NU = 0, 1, 2, 3, 4, 5
@@ -277,8 +285,9 @@ def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
     """
     Elastic + viscous generalised force on the 6 element dofs (into f6, overwritten).
 
-    out[0] = elastic energy, out[1] = viscous power (>= 0), out[2] = sigma_22 (membrane hoop
-    resultant times area, for the muscle power).
+    out[0] = elastic energy, out[1] = viscous power (>= 0), out[2] = -dW/dtau_d at fixed q, the
+    muscle's active force (for its power; linear law: the hoop resultant times area times tau_d).
+    The membrane part is the linear law's, or with F_NEO_HOOKEAN `neo_hookean_membrane`.
     """
     ds = Erow[E_DS]
     A = Erow[E_AREA]
@@ -288,20 +297,33 @@ def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
     psi = P[P_PSI]
     nu = P[P_NU]
     pj = psi * P[P_JS]
-    s0 = A * psi * (e11 + nu * e22)
-    s1 = A * psi * (e22 + nu * e11)
-    s2 = A * P[P_GS] * gam
-    s3 = A * pj * (d11 + nu * d22)
-    s4 = A * pj * (d22 + nu * d11)
-    energy = (
-        0.5
-        * A
-        * (
-            psi * (e11 * e11 + 2 * nu * e11 * e22 + e22 * e22)
-            + pj * (d11 * d11 + 2 * nu * d11 * d22 + d22 * d22)
-            + P[P_GS] * gam * gam
+    if flags & F_NEO_HOOKEAN:
+        s0, s1, membrane, active = neo_hookean_membrane(e11, e22, taud, 0.125 * psi)
+        s0 *= A
+        s1 *= A
+        s2 = A * P[P_GS] * gam
+        s3 = A * pj * (d11 + nu * d22)
+        s4 = A * pj * (d22 + nu * d11)
+        energy = A * membrane + 0.5 * A * (
+            pj * (d11 * d11 + 2 * nu * d11 * d22 + d22 * d22) + P[P_GS] * gam * gam
         )
-    )
+        active *= A
+    else:
+        s0 = A * psi * (e11 + nu * e22)
+        s1 = A * psi * (e22 + nu * e11)
+        s2 = A * P[P_GS] * gam
+        s3 = A * pj * (d11 + nu * d22)
+        s4 = A * pj * (d22 + nu * d11)
+        energy = (
+            0.5
+            * A
+            * (
+                psi * (e11 * e11 + 2 * nu * e11 * e22 + e22 * e22)
+                + pj * (d11 * d11 + 2 * nu * d11 * d22 + d22 * d22)
+                + P[P_GS] * gam * gam
+            )
+        )
+        active = s1 * taud
     pvisc = 0.0
     if flags & F_VISC:
         r0 = 0.0
@@ -335,8 +357,38 @@ def element_force(flags, q6, v6, Erow, taud, P, B, f6, out):
         f6[j] = -(B[0, j] * s0 + B[1, j] * s1v + B[2, j] * s2 + B[3, j] * s3 + B[4, j] * s4)
     out[0] = energy
     out[1] = pvisc
-    out[2] = s1
+    out[2] = active
     return energy
+
+
+@njit(cache=True, nogil=True)
+def neo_hookean_membrane(e11, e22, taud, mu_h):
+    """
+    Incompressible neo-Hookean membrane: resultants, energy and active force per reference area.
+
+    W = mu h (l1^2 + l2^2 + 1/(l1^2 l2^2) - 3), h the half-thickness (2h thick), with
+    l1^2 = 1 + 2 e11 (meridian) and the elastic hoop stretch l2 = tau/tau_d (active strain:
+    the muscle's desired stretch tau_d is a volume-preserving active deformation, Ambrosi &
+    Pezzuto 2012), e22 = (tau^2 - tau_d^2)/2.  With x = l1^2 - 1 and y = l2^2 - 1,
+    W = mu h (x^2 + x y + y^2 + x y (x + y)) / ((1 + x)(1 + y)), exact and free of the
+    cancellation of the first form at small strain.  Returns (N11 = dW/de11, N22 = dW/de22,
+    W, -dW/dtau_d at fixed q); every stretch product l1^2 l2^2 > 0, else the resultants are
+    NaN (the step then fails and says so: docs/theory/shell_rubber.md).
+    """
+    x = 2.0 * e11
+    ti = 1.0 / (taud * taud)
+    y = 2.0 * e22 * ti
+    a = 1.0 + x
+    b = 1.0 + y
+    ab = a * b
+    if not ab > 0.0:
+        return math.nan, math.nan, math.inf, math.nan
+    w = mu_h * (x * x + x * y + y * y + x * y * (x + y)) / ab
+    # dW/dx = mu h (1 - 1/(a^2 b)) = mu h (x (2 + x) + a^2 y)/(a^2 b), and alike in y
+    dwdx = mu_h * (x * (2.0 + x) + a * a * y) / (a * ab)
+    dwdy = mu_h * (y * (2.0 + y) + b * b * x) / (ab * b)
+    # dy/de22 = 2/tau_d^2; dy/dtau_d = -2 (1 + y)/tau_d at fixed tau
+    return 2.0 * dwdx, 2.0 * ti * dwdy, w, 2.0 * dwdy * b / taud
 
 
 @njit(cache=True, nogil=True)
@@ -451,8 +503,9 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
         eel += out[0]
         pvisc += out[1]
         if flags & F_MUSCLE:
-            # dW/dt at fixed q: dW/dtau_d * dtau_d/dt = (-s22 tau_d) * (-amp adot s)
-            pact += out[2] * taud * P[P_AMP] * adot * E[e, E_SMUS]
+            # dW/dt at fixed q: dW/dtau_d * dtau_d/dt = (-out[2]) * (-amp adot s), out[2] being
+            # -dW/dtau_d (linear law: s22 tau_d)
+            pact += out[2] * P[P_AMP] * adot * E[e, E_SMUS]
         for j in range(6):
             F[3 * e + j] += f6[j]
     # contact at the axis: when the wall's midsurface comes closer to the axis than the contact

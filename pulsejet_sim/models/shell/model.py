@@ -11,7 +11,9 @@ is cut into N equal elements; every node carries ``(r, z, theta)``; strains, the
 ``q = 2hG eta + 2h eta_v eta_dot``) and their discrete energy/dissipation are documented in
 shell/kernels.py.  Internal forces are exact gradients of the discrete elastic energy, the viscous
 ones come from a dissipation function, so the scheme conserves energy by construction when the
-viscosity and the fluid loads are off (tested).
+viscosity and the fluid loads are off (tested).  ``material.law: neo_hookean`` makes the membrane
+part an incompressible neo-Hookean sheet's (E = 3 mu, nu = 1/2 elsewhere; the muscle an active
+strain): docs/theory/shell_rubber.md.
 
 *Boundary conditions.*  Pole (node 0): ``r = 0`` and ``theta = theta0(0)`` (0 for a smooth pole),
 ``z`` free.  Ring (node N): clamped to the rigid cap/nozzle, which is part of the vehicle.
@@ -143,6 +145,7 @@ from typing import Any, Mapping
 
 import numpy as np
 from pulsejet_sim.core.model_io import Command, ModelError, Observation, SimulationBlowUp
+from pulsejet_sim.models.rubber import neo_hookean_shear_modulus_pa, refuse_keys_of_other_laws
 from pulsejet_sim.models.shell import kernels as sk
 from pulsejet_sim.models.shell import scene_keys as keys
 from pulsejet_sim.models.shell.geometry import build_reference_meridian, ReferenceMeridian
@@ -263,10 +266,33 @@ def _read_geometry_and_mesh(scene: Mapping[str, Any]) -> tuple[Mapping, Referenc
 
 
 def _read_material(scene: Mapping[str, Any], rmax0: float) -> tuple[dict, Part]:
-    """Return the wall's ``material`` (Kelvin-Voigt) and its stiffness, viscosity and contact."""
+    """
+    Return the wall's ``material`` and its stiffness, viscosity and contact.
+
+    ``law: linear`` (Kelvin-Voigt on the Reissner strains, E and nu) or ``neo_hookean`` (mu from
+    ``silicone`` or ``shear_modulus_pa``, models/rubber.py; E = 3 mu and nu = 1/2 for the rest).
+    """
     mat = keys.section(scene, 'material')
     keys.refuse_unknown(mat, 'material', keys.MATERIAL_SPEC)
-    m = {name: keys.read(mat, 'material', name, keys.MATERIAL_SPEC) for name in keys.MATERIAL_SPEC}
+    law = keys.read(mat, 'material', 'law', keys.MATERIAL_SPEC)
+    refuse_keys_of_other_laws(mat, law, keys.MATERIAL_LAW_KEYS)
+    # the keys every law reads, and the linear law's own (neo_hookean's are read below)
+    law_keys = {name for names in keys.MATERIAL_LAW_KEYS.values() for name in names}
+    read = [name for name in keys.MATERIAL_SPEC
+            if name not in law_keys or (law == 'linear' and name in keys.MATERIAL_LAW_KEYS[law])]
+    m = {name: keys.read(mat, 'material', name, keys.MATERIAL_SPEC) for name in read}
+    m['shear_modulus_pa'] = None
+    m['silicone'] = 'none'
+    if law == 'neo_hookean':
+        # the small-strain moduli of an incompressible neo-Hookean solid: E = 3 mu, nu = 1/2,
+        # used by the bending, shear, viscous and contact terms (docs/theory/shell_rubber.md)
+        m['silicone'] = keys.read(mat, 'material', 'silicone', keys.MATERIAL_SPEC)
+        given_mu = (keys.read(mat, 'material', 'shear_modulus_pa', keys.MATERIAL_SPEC)
+                    if 'shear_modulus_pa' in mat else 0.0)
+        mu = neo_hookean_shear_modulus_pa(mat, m['silicone'], given_mu)
+        m['shear_modulus_pa'] = mu
+        m['youngs_modulus_pa'] = 3.0 * mu
+        m['poisson_ratio'] = keys.NEO_HOOKEAN_POISSON_RATIO
     Ey, eta_v, nu, h = (
         m['youngs_modulus_pa'], m['viscosity_pa_s'], m['poisson_ratio'], m['half_thickness_m']
     )
@@ -768,6 +794,9 @@ class ShellModel:
     name = 'shell'
     code_rim = 0  # paper_code: the node of the clamped rim around the pole
     isotropic_added_mass = False
+    material_law = 'linear'  # material.law (from_scene)
+    shear_modulus_pa = None  # neo_hookean: mu, Pa
+    silicone = 'none'  # neo_hookean: the tabled silicone, if one was named
 
     def __init__(
         self,
@@ -850,6 +879,8 @@ class ShellModel:
         actuation, actuation_flags, p_actuation = _read_actuation(scene, meridian, E, nodes)
         flags = _switch_flags(coupling, outlet['outlet'], terms, material['viscosity_pa_s'])
         flags |= actuation_flags
+        if material['law'] == 'neo_hookean':
+            flags |= sk.F_NEO_HOOKEAN
 
         P = np.zeros(sk.N_PARAMS)
         for part in (p_integrator, p_shape, p_material, p_fluid, p_jet, p_water, p_load,
@@ -891,6 +922,10 @@ class ShellModel:
             for name in ('youngs_modulus_pa', 'viscosity_pa_s', 'poisson_ratio',
                          'half_thickness_m', 'density_kg_m3')
         }
+        #: the wall's elastic law and, with neo_hookean, its shear modulus mu (Pa) and silicone
+        model.material_law = material['law']
+        model.shear_modulus_pa = material['shear_modulus_pa']
+        model.silicone = material['silicone']
         model._refuse_steps_it_cannot_run()
         return model
 

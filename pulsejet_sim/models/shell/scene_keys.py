@@ -23,6 +23,7 @@ from typing import Any, Mapping
 
 from pulsejet_sim.core.model_io import Command, ModelError
 from pulsejet_sim.core.schema import Choice, Flag, Number, show
+from pulsejet_sim.models.rubber import SILICONE_CHOICES
 from pulsejet_sim.models.starting_jet import FORMATION_NUMBER, FORMATION_NUMBER_RANGE
 
 # ---- the choices ------------------------------------------------------------------------------
@@ -133,10 +134,32 @@ GEOMETRY_SPECS = {
 }
 #: the `points` geometry's one key (a list, read by shell/geometry.py)
 GEOMETRY_POINTS_DOC = '[[r, z], ...] from the pole (r = 0) to the ring, at least 3 points'
+#: the wall's elastic laws (docs/theory/shell_rubber.md): the Kelvin-Voigt law on the Reissner
+#: strains, or an incompressible neo-Hookean membrane with the linear bending and shear terms
+MATERIAL_LAWS = ('linear', 'neo_hookean')
+#: the material keys each law takes (the other law's are refused, models/rubber.py)
+MATERIAL_LAW_KEYS = {
+    'linear': ('youngs_modulus_pa', 'poisson_ratio'),
+    'neo_hookean': ('silicone', 'shear_modulus_pa'),
+}
+#: neo_hookean: the small-strain moduli of its bending, shear and viscous terms (incompressible)
+NEO_HOOKEAN_POISSON_RATIO = 0.5
 MATERIAL_SPEC = {
-    'youngs_modulus_pa': _number(None, 10.0, 1e10, 'Pa', 'E'),
+    'law': Key(
+        Choice('linear', MATERIAL_LAWS),
+        'linear: the Kelvin-Voigt law on the Reissner strains (E, nu); neo_hookean: an '
+        'incompressible neo-Hookean membrane (mu), bending and shear linear with E = 3 mu, '
+        'nu = 0.5',
+    ),
+    'youngs_modulus_pa': _number(None, 10.0, 1e10, 'Pa', 'E (linear)',
+                                 default='linear: required; neo_hookean: 3 mu, refused if given'),
+    'silicone': Key(Choice('none', SILICONE_CHOICES),
+                    'neo_hookean: a tabled silicone (models/rubber.py), or give shear_modulus_pa'),
+    'shear_modulus_pa': _number(None, 1.0, 3e9, 'Pa', 'mu (neo_hookean), or give silicone',
+                                default="the silicone's (neo_hookean)"),
     'viscosity_pa_s': _number(None, 0.0, 1e7, 'Pa s', 'the Kelvin-Voigt viscosity eta_v'),
-    'poisson_ratio': _number(None, 0.0, 0.49, '', 'nu'),
+    'poisson_ratio': _number(None, 0.0, 0.49, '', 'nu (linear)',
+                             default='linear: required; neo_hookean: 0.5, refused if given'),
     'half_thickness_m': _number(None, 1e-6, 0.1, 'm', 'h; at most a quarter of the largest radius',
                                 allowed='[1e-06, 0.1], <= 0.25 max(r0)'),
     'density_kg_m3': _number(None, 10.0, 30000.0, 'kg/m^3', "the wall's density"),
