@@ -76,9 +76,10 @@ def test_a_real_ladder_volume_at_second_order_speed_not_yet():
     A real run of the ladder (the from-rest case cut to its first 2 cycles).
 
     The stroke volume converges at the element's order 2; the mean speed does not (the kink
-    node's added mass along an interpolated normal, benchmarks/results/
-    validation_kink_added_mass.md): when the model's kink node is fixed this assertion fails and
-    the validation README's Convergence section must be rewritten with the new orders.
+    node's added mass and tangential drag each take one direction over both sides of the kink,
+    benchmarks/results/validation_kink_wall_loads.md): when the model's kink node is fixed this
+    assertion fails and the validation README's Convergence section must be rewritten with the
+    new orders.
     """
     case = copy.deepcopy(
         validation.load_case(validation.CASES_DIR / 'cable_robot_from_rest.yaml')

@@ -20,9 +20,9 @@ n_cyl^T)`` (on a smooth wall the two halves coincide with the node's block), pat
 built model's node table; (2) with the tangential drag off (``fluid.tangential_drag_coefficient:
 0``, an experiment that changes the physics, not a proposal); (3) both. No scene value and no
 model code changes. The as-coded ladder is read from docs/validation/results.json (same runs,
-same settings). Writes benchmarks/results/validation_kink_added_mass.md.
+same settings). Writes benchmarks/results/validation_kink_wall_loads.md.
 
-    .venv/bin/python -m benchmarks.validation.validation_kink_added_mass
+    .venv/bin/python -m benchmarks.validation.validation_kink_wall_loads
 """
 
 from __future__ import annotations
@@ -108,7 +108,7 @@ def main() -> int:
     lines = [
         common.header(
             "Validation: the kink node's wall loads and the cable robot's mesh order",
-            'python -m benchmarks.validation.validation_kink_added_mass',
+            'python -m benchmarks.validation.validation_kink_wall_loads',
         ).rstrip('\n'),
         '',
         'Each shell case of `pulsejet validate` on its kink-aligned ladder 36/72/144/288 (step '
@@ -139,7 +139,7 @@ def main() -> int:
                 lines.append(
                     f'| | | {label} | {ladder_text([v[name] for v in values])} |'
                 )
-    common.write('validation_kink_added_mass', '\n'.join(lines) + '\n')
+    common.write('validation_kink_wall_loads', '\n'.join(lines) + '\n')
     return 0
 
 
