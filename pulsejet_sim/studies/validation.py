@@ -5,10 +5,11 @@ A case (validation/cases/*.yaml, keys in validation/README.md) names a scene, th
 figures with their source, how each is computed from a run, and its tolerance. This module runs
 each case through the public APIs (load_scene, Simulation, the scene's routine), reads the
 figures from samples of the run, books the energy budget from the model's ledger over the case's
-interval beside what the measured figures imply, reruns the case at half the step to show the
-figures converged, runs the case's probes (numerical experiments, not predictions), and writes
-docs/validation/: report.md (tables), results.json (the stored rows a test reruns) and one PNG
-per case (the predicted time series with the measured figures marked).
+interval beside what the measured figures imply, reruns the case on finer discretisations to show
+the figures converged (a lumped case at dt/2 and dt/4; a shell case: validation_convergence, the
+plan in validation/convergence_plan.md), runs the case's probes (numerical experiments, not
+predictions), and writes docs/validation/: report.md (tables), results.json (the stored rows a
+test reruns) and one PNG per case (the predicted time series with the measured figures marked).
 
 One command regenerates everything: ``pulsejet validate`` (all cases; a subset updates only its
 own entries in results.json and rewrites the report from all stored entries).
@@ -464,7 +465,7 @@ def _is_meshed(scene) -> bool:
 
 def shell_case_convergence(case: dict, scene, values: dict, run: dict) -> dict:
     """
-    The convergence study of a shell case (validation/convergence_plan.md).
+    Run the convergence study of a shell case (validation/convergence_plan.md).
 
     Kink-aligned mesh ladder at dt/8 and Newton tolerance 1e-9 with its Richardson estimate,
     checked against a finer mesh; the step ladder and the Newton tolerance's part at the stored
@@ -501,7 +502,7 @@ def _flag_verdicts(result: dict) -> None:
 
 
 def run_case(case: dict, refine: bool = True, probes: bool = True) -> tuple[dict, Trace]:
-    """Run one case: figures with verdicts, steady check, budget, dt/2 rerun, probes."""
+    """Run one case: figures with verdicts, steady check, budget, refinement, probes."""
     run = case['run']
     scene = _scene(case)
     trace = run_trace(scene, float(run['duration_s']), float(run['sample_period_s']))
@@ -1051,7 +1052,7 @@ def main_validate(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('cases', nargs='*', help='case ids or files (default: all)')
     parser.add_argument('--out-dir', default=str(OUT_DIR), help='where the report is written')
     parser.add_argument('--no-plots', action='store_true', help='do not write the PNGs')
-    parser.add_argument('--no-refine', action='store_true', help='skip the dt/2 reruns')
+    parser.add_argument('--no-refine', action='store_true', help='skip the refinement reruns')
     parser.add_argument('--no-probes', action='store_true', help='skip the numerical experiments')
     args = parser.parse_args(argv)
     try:
