@@ -781,6 +781,11 @@ def _case_section(result: dict) -> list[str]:
                 else 'n/a'
             )
             order = f', observed order {p:.2f}' if p is not None else ''
+            if p is None and None not in vals and vals[-1]:
+                spread = max(abs(v - vals[-1]) for v in vals) / abs(vals[-1])
+                if spread <= 1e-9:
+                    # the rule of refinement(): no order is read from differences at rounding
+                    order = f', differences {spread:.0e} relative: at rounding, no order'
             levels = ' / '.join(_g(v) for v in vals)
             parts.append(f'{name} {levels} (stored vs finest {rel}{order})')
         what = {'step': 'step dt, dt/2, dt/4', 'elements': 'elements n, 2n, 4n'}[ser['series']]
