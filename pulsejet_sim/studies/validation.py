@@ -5,10 +5,11 @@ A case (validation/cases/*.yaml, keys in validation/README.md) names a scene, th
 figures with their source, how each is computed from a run, and its tolerance. This module runs
 each case through the public APIs (load_scene, Simulation, the scene's routine), reads the
 figures from samples of the run, books the energy budget from the model's ledger over the case's
-interval beside what the measured figures imply, reruns the case at half the step to show the
-figures converged, runs the case's probes (numerical experiments, not predictions), and writes
-docs/validation/: report.md (tables), results.json (the stored rows a test reruns) and one PNG
-per case (the predicted time series with the measured figures marked).
+interval beside what the measured figures imply, reruns the case on finer discretisations to show
+the figures converged (a lumped case at dt/2 and dt/4; a shell case: validation_convergence, the
+plan in validation/convergence_plan.md), runs the case's probes (numerical experiments, not
+predictions), and writes docs/validation/: report.md (tables), results.json (the stored rows a
+test reruns) and one PNG per case (the predicted time series with the measured figures marked).
 
 One command regenerates everything: ``pulsejet validate`` (all cases; a subset updates only its
 own entries in results.json and rewrites the report from all stored entries).
@@ -428,17 +429,13 @@ def _scene(case: dict, extra: dict | None = None):
 
 def refinement(case: dict, scene, values: dict, run: dict) -> list[dict]:
     """
-    Rerun the case on finer discretisations: step dt/2 and dt/4; a shell also 2x and 4x elements.
+    Rerun an unmeshed (lumped) case at step dt/2 and dt/4 (a shell case: shell_case_convergence).
 
-    Each series gives the figures and, from the three levels, the observed order
+    The series gives the figures and, from the three levels, the observed order
     p = log2(|f1 - f2| / |f2 - f3|) where the differences are above rounding (None otherwise).
     """
     dt = scene.model.dt_s
     series = [('step', [{'simulation': {'dt_s': dt / 2}}, {'simulation': {'dt_s': dt / 4}}])]
-    mesh = scene.data.get('mesh') if isinstance(scene.data.get('mesh'), dict) else None
-    if mesh and 'elements' in mesh:
-        n = int(mesh['elements'])
-        series.append(('elements', [{'mesh': {'elements': 2 * n}}, {'mesh': {'elements': 4 * n}}]))
     out = []
     for name, levels in series:
         runs = []
@@ -461,8 +458,51 @@ def refinement(case: dict, scene, values: dict, run: dict) -> list[dict]:
     return out
 
 
+def _is_meshed(scene) -> bool:
+    mesh = scene.data.get('mesh')
+    return isinstance(mesh, dict) and 'elements' in mesh
+
+
+def shell_case_convergence(case: dict, scene, values: dict, run: dict) -> dict:
+    """
+    Run the convergence study of a shell case (validation/convergence_plan.md).
+
+    Kink-aligned mesh ladder at dt/8 and Newton tolerance 1e-9 with its Richardson estimate,
+    checked against a finer mesh; the step ladder and the Newton tolerance's part at the stored
+    mesh; the stored mesh doubled (validation_convergence.shell_convergence).
+    """
+    from pulsejet_sim.studies.validation_convergence import shell_convergence
+
+    def figures_at(overrides: dict):
+        trace = run_trace(
+            _scene(case, overrides), float(run['duration_s']), float(run['sample_period_s'])
+        )
+        return figures_of(case, trace)[0], trace.fault
+
+    return shell_convergence(
+        int(scene.data['mesh']['elements']),
+        scene.model.dt_s,
+        scene.data.get('geometry') or {},
+        values,
+        figures_at,
+    )
+
+
+def _flag_verdicts(result: dict) -> None:
+    """Mark each row whose verdict differs anywhere within the converged estimate +- its error."""
+    conv = result['convergence']['figures']
+    for row in result['figures']:
+        c = conv.get(row['figure']) or {}
+        if c.get('converged') is None or row['predicted'] is None:
+            row['verdict_within_estimate'] = None
+            continue
+        spread = abs(row['predicted'] - c['converged']) + c['estimate']
+        ends = {verdict(row, c['converged'] + s * spread)[0] for s in (-1.0, 1.0)}
+        row['verdict_within_estimate'] = ends == {row['verdict']}
+
+
 def run_case(case: dict, refine: bool = True, probes: bool = True) -> tuple[dict, Trace]:
-    """Run one case: figures with verdicts, steady check, budget, dt/2 rerun, probes."""
+    """Run one case: figures with verdicts, steady check, budget, refinement, probes."""
     run = case['run']
     scene = _scene(case)
     trace = run_trace(scene, float(run['duration_s']), float(run['sample_period_s']))
@@ -511,7 +551,10 @@ def run_case(case: dict, refine: bool = True, probes: bool = True) -> tuple[dict
             'mean_velocity_window': now,
             'change_relative': (now - before) / now if now else None,
         }
-    if refine:
+    if refine and _is_meshed(scene):
+        out['convergence'] = shell_case_convergence(case, scene, values, run)
+        _flag_verdicts(out)
+    elif refine:
         out['refinement'] = refinement(case, scene, values, run)
     out['probes'] = []
     if probes:
@@ -738,15 +781,100 @@ def _case_section(result: dict) -> list[str]:
                 else 'n/a'
             )
             order = f', observed order {p:.2f}' if p is not None else ''
+            if p is None and None not in vals and vals[-1]:
+                spread = max(abs(v - vals[-1]) for v in vals) / abs(vals[-1])
+                if spread <= 1e-9:
+                    # the rule of refinement(): no order is read from differences at rounding
+                    order = f', differences {spread:.0e} relative: at rounding, no order'
             levels = ' / '.join(_g(v) for v in vals)
             parts.append(f'{name} {levels} (stored vs finest {rel}{order})')
         what = {'step': 'step dt, dt/2, dt/4', 'elements': 'elements n, 2n, 4n'}[ser['series']]
         lines.append(f'Refinement ({what}): ' + '; '.join(parts) + '.')
+    if result.get('convergence'):
+        lines += convergence_lines(result)
     lines += ['', f'![{result["id"]}]({result["id"]}.png)', '', '### Energy budget', '']
     lines += budget_table(result)
     if result['probes']:
         lines += _probe_section(result)
     lines.append('')
+    return lines
+
+
+def _order(p, why: str = '') -> str:
+    return f'{p:.2f}' if p is not None else f'none ({why})'
+
+
+def _rel(value, spec: str = '+.2g') -> str:
+    return 'n/a' if value is None else f'{100.0 * value:{spec}} %'
+
+
+def convergence_lines(result: dict) -> list[str]:
+    """Render a shell case's convergence study (validation/convergence_plan.md) as a table."""
+    conv = result['convergence']
+    ladder = [r['elements'] for r in conv['mesh_ladder']]
+    steps = [r['dt_s'] for r in conv['step_ladder']]
+    doubled = [r['elements'] for r in conv['doubled_stored_mesh']]
+    places = ', '.join(
+        f'{n}: ' + '/'.join(f'{x:.2f}' for x in v)
+        for n, v in conv['kink_place_in_element'].items()
+    )
+    faults = [
+        f'{r["elements"]} el. {r["dt_s"]:g} s: {r["fault"]}'
+        for key in ('mesh_ladder', 'step_ladder', 'doubled_stored_mesh')
+        for r in conv[key]
+        if r['fault']
+    ]
+    lines = [
+        '',
+        '### Convergence',
+        '',
+        f'Mesh ladder {"/".join(map(str, ladder[:3]))} elements (a node on the cap/cylinder kink; '
+        f"the kink's place inside its element, by mesh: {places}) at step "
+        f'{conv["ladder_dt_s"]:g} s and Newton tolerance {conv["newton_tolerance"]:g}; '
+        f'checked against {ladder[3]} elements. Converged = Richardson estimate with the '
+        f'observed order when that order is within 0.5 of 2, error estimate = 1.25 |f{ladder[2]} '
+        f"- converged| + the step's error at {conv['ladder_dt_s']:g} s ({ladder[1]} elements, "
+        f'|f({2 * conv["ladder_dt_s"]:g} s) - f({conv["ladder_dt_s"]:g} s)| / 3); when the '
+        f'order is not, converged = the {ladder[3]}-element run and error estimate = the larger '
+        f'of |f{ladder[1]} - f{ladder[2]}| and |f{ladder[2]} - f{ladder[3]}| (the error left at '
+        f'{ladder[3]} elements if it is first order) + the same step error. The stored '
+        "error is split into the Newton tolerance's part (the stored run against the same mesh "
+        f"and step at {conv['newton_tolerance']:g}), the step's part (step ladder "
+        f'{", ".join(f"{d:g}" for d in steps)} s at the stored mesh) and the mesh'
+        "'s part (the "
+        'rest). Last column: the stored mesh doubled '
+        f'({"/".join(map(str, doubled))} elements at {conv["ladder_dt_s"]:g} s), whose kink falls '
+        'at a different place in its element at each level.'
+        + (' FAULT: ' + '; '.join(faults) if faults else ''),
+        '',
+        f'| figure | stored | converged +- estimate | how | stored error (tolerance / step / '
+        f'mesh part) | ladder {"/".join(map(str, ladder[:3]))}: order | check {ladder[3]} '
+        f'(order {"/".join(map(str, ladder[1:]))}) | step order at {doubled[0]} el. | '
+        f'{"/".join(map(str, doubled))}: order |',
+        '|---|---|---|---|---|---|---|---|---|',
+    ]
+    for row in result['figures']:
+        c = conv['figures'].get(row['figure']) or {}
+        if c.get('converged') is None:
+            lines.append(f'| {row["figure"]} | {_g(row["predicted"])} | {c.get("how", "n/a")} |')
+            continue
+        ok = {True: 'within', False: '**outside**', None: 'not independent'}[c['check_ok']]
+        flip = row.get('verdict_within_estimate')
+        verdict_note = '' if flip in (True, None) else ' (**verdict changes within it**)'
+        lines.append(
+            f'| {row["figure"]} | {_g(c.get("stored"), ".6g")} | '
+            f'{_g(c["converged"], ".6g")} +- {_rel(c["estimate_rel"], ".2g")}{verdict_note} | '
+            f'{c["how"]} | {_rel(c.get("stored_error_rel"))} ({_rel(c.get("tolerance_part_rel"))}'
+            f' / {_rel(c.get("step_part_rel"))} / {_rel(c.get("mesh_part_rel"))}) | '
+            f'{" / ".join(_g(v, ".6g") for v in c["ladder"])}: '
+            f'{_order(c["order"], c["order_why"])} | '
+            f'{_g(c["check"], ".6g")}: {_rel(c.get("check_rel"))}, {ok} '
+            f'(order {_order(c["order_fine"], c["order_fine_why"])}) | '
+            f'{_order(c.get("step_order"), c.get("step_order_why", ""))}, '
+            f'{_order(c.get("step_order_fine"), c.get("step_order_fine_why", ""))} | '
+            f'{" / ".join(_g(v, ".6g") for v in c["doubled"])}: '
+            f'{_order(c["doubled_order"], c["doubled_order_why"])} |'
+        )
     return lines
 
 
@@ -929,7 +1057,7 @@ def main_validate(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('cases', nargs='*', help='case ids or files (default: all)')
     parser.add_argument('--out-dir', default=str(OUT_DIR), help='where the report is written')
     parser.add_argument('--no-plots', action='store_true', help='do not write the PNGs')
-    parser.add_argument('--no-refine', action='store_true', help='skip the dt/2 reruns')
+    parser.add_argument('--no-refine', action='store_true', help='skip the refinement reruns')
     parser.add_argument('--no-probes', action='store_true', help='skip the numerical experiments')
     args = parser.parse_args(argv)
     try:
