@@ -340,3 +340,24 @@ def test_the_water_insides_momentum_takes_finding_4_below_its_rule():
         assert stiff[0]['routine'] == 'T0.53'
         ratio = study.speed(stiff[0]) / study.speed(stiff[1])
         assert 1.75 < ratio < study.DOUBLES, ratio
+
+
+def test_a_rewritten_report_keeps_the_hand_written_notes(tmp_path):
+    """
+    Rewriting README.md keeps its hand-written notes, once, and refuses an unclosed block.
+
+    A rerun of the study regenerates its report; the notes between study.NOTES_BEGIN and
+    study.NOTES_END (what was rerun and why) are carried over, so a rerun loses no text.
+    """
+    notes = study.kept_notes(study.OUT / 'README.md')
+    assert notes[0] == study.NOTES_BEGIN and notes[-2] == study.NOTES_END and len(notes) > 4
+    (tmp_path / 'README.md').write_text((study.OUT / 'README.md').read_text())
+    meta, specs = load_sweep(study.SWEEP)
+    study.report(meta, len(specs), STORED, REFINED, None, out=tmp_path)
+    first = (tmp_path / 'README.md').read_text()
+    assert '\n'.join(notes) in first and first.count(study.NOTES_BEGIN) == 1
+    study.report(meta, len(specs), STORED, REFINED, None, out=tmp_path)
+    assert (tmp_path / 'README.md').read_text() == first
+    (tmp_path / 'README.md').write_text(first.replace(study.NOTES_END, ''))
+    with pytest.raises(SystemExit, match='without'):
+        study.report(meta, len(specs), STORED, REFINED, None, out=tmp_path)

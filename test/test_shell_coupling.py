@@ -214,7 +214,7 @@ def test_constant_depth_muscle_moves_the_cone_inwards_by_one_depth():
     depth = 0.25 * model.E[:, sk.E_SMUS] * r0m  # r0 - r_desired at full activation
     xm = (np.arange(len(r0m)) + 0.5) / len(r0m)
     middle = (xm > 0.3) & (xm < 0.7)
-    assert np.allclose(depth[middle], 0.25 * r0m.max(), rtol=1e-12)
+    assert np.allclose(depth[middle], 0.25 * 0.03, rtol=1e-12)  # the ring's radius, m
     assert np.all(
         1.0 - 0.25 * model.E[:, sk.E_SMUS] >= 0.05 - 1e-12
     )  # capped where the cone is narrow
@@ -222,6 +222,46 @@ def test_constant_depth_muscle_moves_the_cone_inwards_by_one_depth():
         cone_scene('paper', actuation={**muscle, 'desired_radius': 'proportional'})
     )
     assert np.allclose(proportional.E[middle, sk.E_SMUS], 1.0)
+
+
+@pytest.mark.parametrize('elements', [6, 12, 24])
+@pytest.mark.parametrize('geometry', ['cone', 'ellipsoid'])
+def test_constant_depth_takes_the_meridians_largest_radius_not_the_midpoints(elements, geometry):
+    """
+    The constant depth is ``amplitude x max(r0)`` of the reference meridian's nodes.
+
+    On the cone that is the ring's radius whatever the mesh; the element midpoints' largest radius
+    falls half an element's rise short of it (a first-order error in every depth, which made the
+    muscle-driven cone converge at first order: benchmarks/results/paper000_study/muscle_depth.md).
+    """
+    muscle = {
+        'kind': 'muscle',
+        'source': 'routine',
+        'amplitude': 0.25,
+        'desired_radius': 'constant_depth',
+        'taper_fraction': 0.15,
+        'frequency_hz': 1.5,
+        'contraction_s': 0.2,
+        'release_s': 0.3,
+    }
+    scene = cone_scene('paper', elements=elements, actuation=muscle)
+    if geometry == 'ellipsoid':
+        scene['geometry'] = {
+            'kind': 'ellipsoid',
+            'semi_axis_axial_m': 0.09,
+            'semi_axis_radial_m': 0.035,
+            'opening_radius_m': 0.0125,
+        }
+    model = ShellModel.from_scene(scene)
+    r0m = model.E[:, sk.E_R0M]
+    depth = 0.25 * model.E[:, sk.E_SMUS] * r0m
+    xm = (np.arange(len(r0m)) + 0.5) / len(r0m)
+    middle = (xm > 0.3) & (xm < 0.7)
+    largest = float(model.ref.r0.max())
+    if geometry == 'cone':
+        assert largest == 0.03  # the ring's radius, m
+        assert r0m.max() < largest - 0.2 * (r0m[-1] - r0m[-2])  # the midpoints fall short
+    assert np.allclose(depth[middle], 0.25 * largest, rtol=1e-12)
 
 
 def test_constant_depth_to_edge_muscle_narrows_the_free_edge():
@@ -245,9 +285,7 @@ def test_constant_depth_to_edge_muscle_narrows_the_free_edge():
     to_edge = ShellModel.from_scene(cone_scene('paper', actuation=muscle))
     r0m = to_edge.E[:, sk.E_R0M]
     depth = 0.25 * to_edge.E[:, sk.E_SMUS] * r0m
-    assert depth[-1] == pytest.approx(
-        0.25 * r0m.max(), rel=1e-12
-    )  # full depth at the edge element
+    assert depth[-1] == pytest.approx(0.25 * 0.03, rel=1e-12)  # full depth at the edge element
     assert depth[0] < 0.1 * depth[-1]  # still tapered at the pole
     tapered = ShellModel.from_scene(
         cone_scene('paper', actuation={**muscle, 'desired_radius': 'constant_depth'})

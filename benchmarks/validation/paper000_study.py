@@ -12,6 +12,8 @@ The findings are checked by the rules in `findings` below, fixed before the stud
 made stricter after an independent review, before any outcome had been read: findings 2, 3, 4);
 the study's values are in config/sweeps/paper000_study.yaml, chosen once with their reasons there.
 `--report-only` rebuilds README.md from the stored tables without running anything.
+Hand-written notes in README.md between `NOTES_BEGIN` and `NOTES_END` (HTML comments) are kept
+on every rewrite, after the history paragraph, so a rerun does not lose them.
 `study.csv` holds only deterministic columns, so a rerun reproduces it bit for bit (the test
 `test/test_paper000_study.py` reruns one case and compares it with its stored row).
 """
@@ -54,6 +56,9 @@ FINER = {
     'simulation': {'dt_s': 1.25e-4},
 }
 CONVERGED = 0.02  # a run's peak speed within 2 % of the refined run's
+# hand-written notes of README.md live between these two lines, which every rewrite keeps
+NOTES_BEGIN = '<!-- hand-written notes: kept by paper000_study on every rewrite -->'
+NOTES_END = '<!-- end of hand-written notes -->'
 SPREAD_ALMOST_NONE = 1.15  # "almost independent of the routine": fastest/slowest routine <= 1.15
 DOUBLES = 1.8  # "doubling": fastest/second-fastest routine >= 1.8
 
@@ -239,8 +244,30 @@ def main() -> int:
     return 0
 
 
+def kept_notes(readme: Path) -> list[str]:
+    """
+    Return the hand-written block of ``readme`` (markers included), [] if it has none.
+
+    A README that holds a start marker without its end marker is refused, so that a rewrite never
+    drops the text after it.
+    """
+    if not readme.exists():
+        return []
+    lines = readme.read_text().split('\n')
+    if NOTES_BEGIN not in lines:
+        return []
+    start = lines.index(NOTES_BEGIN)
+    if NOTES_END not in lines[start:]:
+        raise SystemExit(
+            f'{readme}: {NOTES_BEGIN!r} without {NOTES_END!r} after it; close the hand-written '
+            'block before rewriting the report'
+        )
+    return lines[start:lines.index(NOTES_END, start) + 1] + ['']
+
+
 def report(
-    meta: dict, n_runs: int, rows: list[dict], fine_rows: list[dict], wall: float | None
+    meta: dict, n_runs: int, rows: list[dict], fine_rows: list[dict], wall: float | None,
+    out: Path = OUT,
 ) -> None:
     errors = [abs(speed(r) / speed(f) - 1.0) for r, f in zip(rows, fine_rows)]
     when = (
@@ -279,7 +306,7 @@ def report(
             ' Discussion: docs/theory/shell.md.'
         ),
         '',
-    ]
+    ] + kept_notes(out / 'README.md')
     for coupling in ('paper', 'consistent'):
         group = [r for r in rows if r['coupling'] == coupling]
         lines += [
@@ -311,7 +338,7 @@ def report(
     faults = [r for r in rows + fine_rows if r['fault']]
     lines += ['', f'Faults: {len(faults)}'] + [f'- {r["run"]}: {r["fault"]}' for r in faults]
     text = '\n'.join(lines) + '\n'
-    (OUT / 'README.md').write_text(text)
+    (out / 'README.md').write_text(text)
     print(text)
 
 

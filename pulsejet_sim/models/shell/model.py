@@ -604,7 +604,11 @@ def _read_muscle(act: Mapping[str, Any], meridian: ReferenceMeridian, E: np.ndar
     desired = keys.read(act, 'actuation', 'desired_radius', keys.ACTUATION_SPEC)
     X = meridian.X
     Xm = 0.5 * (X[:-1] + X[1:]) / X[-1]
-    E[:, sk.E_SMUS] = muscle_shape(desired, Xm, E[:, sk.E_R0M], taper, amp)
+    # the meridian's own largest radius (the ring's on the cone), not the midpoints': theirs falls
+    # half an element's rise short on a cone, a first-order error in every depth (muscle_depth.md)
+    E[:, sk.E_SMUS] = muscle_shape(
+        desired, Xm, E[:, sk.E_R0M], taper, amp, float(meridian.r0.max())
+    )
     return {'amplitude': amp, 'taper_fraction': taper, 'desired_radius': desired}
 
 
@@ -698,7 +702,7 @@ def _switch_flags(coupling: str, outlet: str, terms: dict, viscosity_pa_s: float
 
 
 def muscle_shape(
-    desired: str, Xm: np.ndarray, r0m: np.ndarray, taper: float, amp: float
+    desired: str, Xm: np.ndarray, r0m: np.ndarray, taper: float, amp: float, rmax_m: float
 ) -> np.ndarray:
     """
     Return, per element, the drop of the desired hoop stretch at full activation over ``amp``.
@@ -709,11 +713,13 @@ def muscle_shape(
     radius.  ``constant_depth`` (our reading of paper 000's Fig. 12, whose curves are lost: "the
     desired radius function is linear (constant) for most of the mantle profile and thus more
     attuned with the linear conical profile"): the desired radius is the rest profile moved inwards
-    by the same depth ``amp a(t) max(r0) s(X)`` everywhere, so on a cone it is again a straight
+    by the same depth ``amp a(t) rmax_m s(X)`` everywhere, so on a cone it is again a straight
     line parallel to the wall, and on an ellipsoid it is the ellipse moved inwards; the hoop strain
     it asks for is then largest where the mantle is narrow, capped at a desired stretch of 0.05.
     ``s(X)`` is 1 over the mantle and falls smoothly to 0 over ``taper`` of the meridian at the
-    pole and at the edge.
+    pole and at the edge.  ``rmax_m``, m: the reference meridian's largest radius, ``max(r0)``
+    over its nodes (the ring's radius on a cone); ``Xm`` the midpoints' arc length over the
+    meridian's, ``r0m`` their radii, m.
 
     ``constant_depth_to_edge`` (a third reading of Fig. 12, run as an experiment):
     ``constant_depth`` held up to the free edge, tapered at the pole only.  Section 5.2 says the
@@ -733,7 +739,7 @@ def muscle_shape(
         s = smooth(Xm / taper) * smooth((1 - Xm) / taper)
     if desired == 'proportional':
         return s
-    depth = s * float(r0m.max()) / r0m
+    depth = s * rmax_m / r0m
     return np.minimum(depth, 0.95 / amp) if amp > 0 else depth
 
 
