@@ -1,10 +1,12 @@
 """
-The offline recording path: batched CDR records, the same file, readable by rosbags and our reader.
+The offline recording path: batched CDR records, the same messages, readable by rosbags and ours.
 
-`pulsejet run` writes bag.cdr bytes through BagWriter.write_records (one lock per batch, the
-Message records appended to mcap's open chunk directly). These tests hold that path to the file
-the public per-message path writes, byte for byte, and the recording of both default scenes to
-what a ROS reader and the project's reader decode, value for value against the physics.
+`pulsejet run` lays out a chunk of publications at a time with numpy (bag.publications) and
+writes it with BagWriter.write_chunk; BagWriter.write_records / write_batch append bag.cdr bytes
+to mcap's open chunk. These tests hold the batched paths to the file the public per-message path
+writes, byte for byte, the runner's chunks to the messages of a write_records call per
+publication, message for message, and the recording of both default scenes to what a ROS reader
+and the project's reader decode, value for value against the physics.
 """
 
 import datetime
@@ -141,24 +143,65 @@ def test_a_recorded_run_opens_in_rosbags_with_every_topic_and_matches_the_physic
     assert own == velocity
 
 
+def mcap_messages(path: Path) -> list[tuple]:
+    """(topic, log time, publish time, sequence, bytes) of every message, in file order."""
+    from mcap.reader import make_reader
+
+    with open(path, 'rb') as fh:
+        return [
+            (channel.topic, m.log_time, m.publish_time, m.sequence, m.data)
+            for _, channel, m in make_reader(fh).iter_messages(log_time_order=False)
+        ]
+
+
+def mcap_summary(path: Path):
+    from mcap.reader import make_reader
+
+    with open(path, 'rb') as fh:
+        return make_reader(fh).get_summary()
+
+
 @pytest.mark.timeout(300)
 @pytest.mark.parametrize('name, duration_s', [('shell_robot', 4.0), ('pump_cycle', 3.0)])
-def test_run_scene_writes_the_file_one_write_records_per_publication_writes(
-    tmp_path, fixed_close_time, name, duration_s
+def test_run_scene_records_the_messages_one_write_records_per_publication_writes(
+    tmp_path, name, duration_s
 ):
-    """The columnar recording (several chunks, batches across chunk ends) changes no byte."""
+    """
+    The laid-out chunks (bag.publications) hold the per-message encoder's messages, in order.
+
+    Same topics, log and publish times, sequences and bytes (TopicEncoder's, which test_cdr holds
+    to rclpy's), the same schemas and channels; several chunks, each with its message indexes.
+    """
     (tmp_path / 'a').mkdir()
     (tmp_path / 'b').mkdir()
     from benchmarks.performance.bench_recording import write_per_publication
 
-    write_per_publication(tmp_path / 'a' / 'run.mcap', name, duration_s)
-    run_scene(load_scene(name), duration_s, tmp_path / 'b' / 'run.mcap')
-    reference = (tmp_path / 'a' / 'run.mcap').read_bytes()
+    reference, recorded = tmp_path / 'a' / 'run.mcap', tmp_path / 'b' / 'run.mcap'
+    write_per_publication(reference, name, duration_s)
+    result = run_scene(load_scene(name), duration_s, recorded)
+    expected = mcap_messages(reference)
+    assert mcap_messages(recorded) == expected
+    assert len(expected) > 11 * result.publications  # commands, state, profile; ledgers
+    want, got = mcap_summary(reference), mcap_summary(recorded)
+    assert got.schemas == want.schemas and got.channels == want.channels
+    assert got.statistics.message_count == len(expected)
+    assert got.statistics.channel_message_counts == want.statistics.channel_message_counts
+    assert got.statistics.chunk_count > 1
+    chunks = got.chunk_indexes
+    assert [c.message_start_time for c in chunks] == sorted(c.message_start_time for c in chunks)
+    assert all(c.compression == 'zstd' and c.message_index_offsets for c in chunks)
+    # the message indexes point at every message (mcap's indexed reader goes through them)
     from mcap.reader import make_reader
 
-    with open(tmp_path / 'a' / 'run.mcap', 'rb') as fh:
-        assert make_reader(fh).get_summary().statistics.chunk_count > 1
-    assert (tmp_path / 'b' / 'run.mcap').read_bytes() == reference
+    with open(recorded, 'rb') as fh:
+        indexed = [
+            (channel.topic, m.log_time, m.sequence, m.data)
+            for _, channel, m in make_reader(fh).iter_messages(log_time_order=True)
+        ]
+    assert sorted(indexed, key=lambda m: (m[1], m[0], m[2])) == sorted(
+        ((t, log, seq, data) for t, log, _, seq, data in expected),
+        key=lambda m: (m[1], m[0], m[2]),
+    )
 
 
 def test_column_encoder_rows_are_the_per_message_bytes():
@@ -239,7 +282,7 @@ import sys
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.studies import runner
 
-runner._RunColumns.FLUSH_PUBLICATIONS = 10**9  # nothing reaches the writer before close
+runner._RunColumns.PUBLICATIONS_PER_CHUNK = 10**5  # none reach the writer before close
 count = 0
 iterate = runner.Drive.__iter__
 

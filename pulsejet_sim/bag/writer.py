@@ -39,10 +39,11 @@ import struct
 import threading
 import time
 from types import FrameType
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence, TYPE_CHECKING
 import weakref
+import zlib
 
-from mcap.records import MessageIndex
+from mcap.records import ChunkIndex, MessageIndex
 from mcap.writer import CompressionType, Writer
 import numpy as np
 from pulsejet_sim.bag import msgdefs
@@ -50,6 +51,9 @@ from pulsejet_sim.bag.batch import Merged, RecordBatch
 from pulsejet_sim.bag.records import FORMAT_VERSION
 from pulsejet_sim.core.schema import dump_yaml, load_own_yaml
 import yaml
+
+if TYPE_CHECKING:
+    from pulsejet_sim.bag.publications import Stretch
 
 LIBRARY = f'pulsejet_sim.bag pulsejet-format={FORMAT_VERSION} (rosbag2_storage_mcap layout)'
 COMPRESSIONS = {
@@ -129,6 +133,7 @@ class BagWriter:
             )
         self.path = Path(path)
         self.compression = compression
+        self.chunk_size_bytes = chunk_size_bytes
         self.flush_period_s = float(flush_period_s)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, 'wb')
@@ -157,8 +162,13 @@ class BagWriter:
         # alive.
         self._atexit = _weak_close(self)
         atexit.register(self._atexit)
-        # An idle writer (no write() to trigger the flush) still flushes within flush_period_s.
+        # An idle writer (no write() to trigger the flush) still flushes within flush_period_s:
+        # a thread started with the first message left in an open chunk (write_chunk leaves
+        # none, so a writer fed only chunks starts none)
         self._stop_flusher = threading.Event()
+        self._flusher: threading.Thread | None = None
+
+    def _start_flusher(self) -> None:
         self._flusher = threading.Thread(
             target=_flush_loop,
             args=(weakref.ref(self), self._stop_flusher, self._tick_s()),
@@ -296,6 +306,8 @@ class BagWriter:
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
+                if self._flusher is None:
+                    self._start_flusher()
             if self._flush_due(now):
                 self._flush_locked()
 
@@ -330,6 +342,8 @@ class BagWriter:
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
+                if self._flusher is None:
+                    self._start_flusher()
             if self._flush_due(now):
                 self._flush_locked()
 
@@ -391,8 +405,64 @@ class BagWriter:
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
+                if self._flusher is None:
+                    self._start_flusher()
             if self._flush_due(now):
                 self._flush_locked()
+
+    def channel_ids(self, topics: Sequence[str]) -> dict[str, int]:
+        """
+        Add the pulsejet topics (interface.TOPIC_TYPES types) in this order; return their channels.
+
+        For a producer that lays out its own records (write_chunk): topic -> channel id.
+        """
+        return {topic: self._route_of(topic)[0] for topic in topics}
+
+    def write_chunk(self, stretch: 'Stretch') -> None:
+        """
+        Write a stretch of Message records (bag.publications.Stretch) as one MCAP chunk.
+
+        The records must be on channels added here (channel_ids), with sequences continuing each
+        channel's count and log times not before what was written. The chunk is compressed as
+        the writer's other chunks, followed by its message indexes and counted in the summary
+        (statistics, chunk index), as mcap's writer does for the same records; schema and
+        channel records added since the last chunk open it. With an mcap library that does not
+        look as expected, the records go through mcap's add_message one by one (the same
+        messages in different chunks).
+        """
+        records = stretch.records
+        if not len(records):
+            return
+        counts = {channel: len(table) for channel, table in stretch.index}
+        names = {route[0]: route[1] for route in self._route.values()}
+        unknown = sorted(set(counts) - set(names))
+        if unknown:
+            raise BagError(
+                f'channel ids {unknown} were not added with channel_ids; allowed: {sorted(names)}'
+            )
+        if stretch.first_ns < 0:
+            raise BagError(
+                f'log_time_ns={stretch.first_ns!r} rejected; allowed: an integer >= 0 (ns)'
+            )
+        with self._mutating():
+            if self._fast is not None:
+                self._fast.write_chunk(stretch, self.compression)
+            else:
+                data = records
+                offset = 0
+                while offset < len(data):
+                    _, length, channel, sequence, log_ns, publish_ns = _MESSAGE_HEAD.unpack_from(
+                        data, offset
+                    )
+                    body = data[offset + _MESSAGE_HEAD.size:offset + 9 + length]
+                    self._writer.add_message(channel, log_ns, body, publish_ns, sequence)
+                    offset += 9 + length
+            for channel, count in counts.items():
+                self._counts[names[channel]] += count
+            first, last = stretch.first_ns, stretch.last_ns
+            self._first_ns = first if self._first_ns is None else min(self._first_ns, first)
+            self._last_ns = last if self._last_ns is None else max(self._last_ns, last)
+            self._flush_locked()  # the chunk is closed: hand it to the OS now
 
     def _route_of(self, topic: str) -> tuple[int, str]:
         """(channel id, qualified name) of a topic as write_records gets it; adds the topic."""
@@ -616,7 +686,8 @@ class _FastChunk:
     takes the fast one).
     """
 
-    __slots__ = ('writer', 'builder', 'stats', 'finalize', 'chunk_size')
+    __slots__ = ('writer', 'builder', 'stats', 'finalize', 'chunk_size', 'finish_chunk', 'flush',
+                 'stream', 'chunk_indexes', 'compressor')
 
     @classmethod
     def attach(cls, writer: Writer, chunk_size: int) -> '_FastChunk | None':
@@ -624,6 +695,7 @@ class _FastChunk:
         from mcap.data_stream import RecordBuilder
         from mcap.opcode import Opcode
         from mcap.records import Statistics
+        from mcap.writer import IndexType
 
         fast = cls()
         fast.writer = writer
@@ -631,12 +703,23 @@ class _FastChunk:
         fast.stats = getattr(writer, '_Writer__statistics', None)
         fast.finalize = getattr(writer, '_Writer__maybe_finalize_chunk', None)
         fast.chunk_size = chunk_size
+        fast.finish_chunk = getattr(writer, '_Writer__finalize_chunk', None)
+        fast.flush = getattr(writer, '_Writer__flush', None)
+        fast.stream = getattr(writer, '_Writer__stream', None)
+        fast.chunk_indexes = getattr(writer, '_Writer__chunk_indices', None)
+        fast.compressor = None
         expected = (
             type(fast.builder) is ChunkBuilder
             and type(getattr(fast.builder, 'record_writer', None)) is RecordBuilder
             and isinstance(getattr(fast.builder.record_writer, '_buffer', None), io.BytesIO)
             and isinstance(fast.stats, Statistics)
             and callable(fast.finalize)
+            and callable(fast.finish_chunk)
+            and callable(fast.flush)
+            and hasattr(fast.stream, 'tell')
+            and isinstance(fast.chunk_indexes, list)
+            and getattr(writer, '_Writer__enable_crcs', None) is True
+            and getattr(writer, '_Writer__index_types', None) == IndexType.ALL
             and getattr(writer, '_Writer__chunk_size', None) == chunk_size
             and int(Opcode.MESSAGE) == 5
             and int(Opcode.MESSAGE_INDEX) == 7
@@ -758,6 +841,74 @@ class _FastChunk:
             i += m
             if ends[m - 1] > chunk_size:
                 self.finalize()
+
+    def write_chunk(self, stretch: 'Stretch', compression: str) -> None:
+        """
+        Write the stretch as one Chunk record, its MessageIndex records and its ChunkIndex.
+
+        What mcap.writer.Writer's __finalize_chunk writes for a chunk holding these records:
+        a message still open in mcap's chunk is written in a chunk of its own first; schema
+        and channel records waiting there open this one.
+        """
+        builder, stats = self.builder, self.stats
+        if builder.num_messages:
+            self.finish_chunk()
+        prefix = builder.record_writer.end()  # schema and channel records added since
+        builder.reset()
+        data = prefix + stretch.records if prefix else stretch.records
+        size = len(data)
+        crc = zlib.crc32(data)
+        if compression == 'zstd':
+            if self.compressor is None:
+                import zstandard
+
+                self.compressor = zstandard.ZstdCompressor(level=1)
+            packed = self.compressor.compress(data)
+        elif compression == 'lz4':
+            import lz4.frame
+
+            packed = lz4.frame.compress(data)
+        else:
+            compression, packed = '', data
+        tag = compression.encode()
+        head = struct.pack(
+            '<BQQQQII', 6, 8 + 8 + 8 + 4 + 4 + len(tag) + 8 + len(packed),
+            stretch.first_ns, stretch.last_ns, size, crc, len(tag),
+        ) + tag + struct.pack('<Q', len(packed))
+        self.flush()  # whatever mcap holds outside a chunk goes first
+        stream = self.stream
+        chunk_start = stream.tell()
+        stream.write(head)
+        stream.write(packed)
+        chunk_length = len(head) + len(packed)
+        index_start = chunk_start + chunk_length
+        offsets, parts, at = {}, [], index_start
+        shift = len(prefix)
+        for channel, table in stretch.index:
+            if shift:
+                table = table + np.array([0, shift], dtype='<u8')
+            body = table.astype('<u8', copy=False).tobytes()
+            parts.append(struct.pack('<BQHI', 7, 6 + len(body), channel, len(body)))
+            parts.append(body)
+            offsets[channel] = at
+            at += 15 + len(body)
+        stream.write(b''.join(parts))
+        self.chunk_indexes.append(ChunkIndex(
+            message_start_time=stretch.first_ns,
+            message_end_time=stretch.last_ns,
+            chunk_start_offset=chunk_start,
+            chunk_length=chunk_length,
+            message_index_offsets=offsets,
+            message_index_length=at - index_start,
+            compression=compression,
+            compressed_size=len(packed),
+            uncompressed_size=size,
+        ))
+        count = sum(len(table) for _, table in stretch.index)
+        _extend_statistics(stats, stretch.first_ns, stretch.last_ns, count)
+        for channel, table in stretch.index:
+            stats.channel_message_counts[channel] += len(table)
+        stats.chunk_count += 1
 
 
 def _extend_statistics(stats, first_ns: int, last_ns: int, count: int) -> None:

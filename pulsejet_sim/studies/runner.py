@@ -23,10 +23,6 @@ from pulsejet_sim.routines import routine_from_scene
 from pulsejet_sim.scene import Scene
 
 LEDGER_PERIOD_S = 0.2  # energy ledger messages at 5 Hz, as sim_node publishes them
-#: the Observation fields the state topics carry (bag.cdr.ColumnEncoder.state's names)
-STATE_FIELDS = (
-    'mantle_radius_m', 'volume_m3', 'velocity_m_s', 'thrust_n', 'fluid_mass_kg', 'position_m'
-)
 
 
 def steps_per_publication(scene: Scene) -> int:
@@ -115,7 +111,7 @@ def _record(drive: Drive, out: Path) -> RunResult:
             'scene_yaml': dump_yaml(dict(scene.data, name=scene.name)),
         },
     )
-    columns = _RunColumns(writer)
+    columns = _RunColumns(writer, sim)
     writer.on_close(columns.flush)
     # Ctrl-C or SIGTERM during a long offline run still leaves a complete, readable file
     restore_signals = (
@@ -123,17 +119,15 @@ def _record(drive: Drive, out: Path) -> RunResult:
         if threading.current_thread() is threading.main_thread()
         else None
     )
-    published = 0
+    published, last = 0, drive.batches
     try:
-        columns.state(sim, sim.observe(), ledger=True)
+        columns.add(-1.0, None, sim.observe(), True)
+        add = columns.add
         for start_s, command, obs in drive:
-            columns.commands(start_s, command)
             published += 1
-            columns.state(
-                sim, obs, ledger=published % ledger_every == 0 or published == drive.batches
-            )
+            add(start_s, command, obs, published % ledger_every == 0 or published == last)
         if drive.fault is not None:
-            columns.state(sim, sim.observe(), ledger=True)
+            columns.add(-1.0, None, sim.observe(), True)
     finally:
         writer.close()  # hands the last columns over first (on_close)
         if restore_signals is not None:
@@ -143,100 +137,127 @@ def _record(drive: Drive, out: Path) -> RunResult:
 
 class _RunColumns:
     """
-    The run's messages as columns, written a stretch at a time (bag.batch, bag.cdr.ColumnEncoder).
+    The run's publications as columns, written a chunk at a time (bag.publications).
 
-    Per publication only one tuple is appended (one bytecode, so a signal handler that closes the
-    writer mid-run sees whole publications); flush() encodes each topic's messages at once. The
-    order keys put a publication's commands before its state, each group in the order sim_node
-    publishes it, so the file is the one a write_records call per publication writes.
+    Per publication the command, the state values and the model's profile sample go into rows
+    of preallocated arrays (the ledger, every LEDGER_PERIOD_S, as its CDR bytes); the row
+    counts only once it is complete (one store, so a signal handler that closes the writer
+    mid-run hands over whole publications). flush() lays out the records of every row with
+    numpy (PublicationLayout.records) and writes them as one MCAP chunk (BagWriter.write_chunk).
     """
 
-    FLUSH_PUBLICATIONS = 250  # about 0.3 MB of messages per flush for the default shell scene
-    # slots within a publication: commands, the applied command, state topics, profile, ledger
-    SLOT_APPLIED, SLOT_STATE, SLOT_PROFILE, SLOT_LEDGER, SLOTS = 3, 4, 11, 12, 16
+    #: rows per chunk; None: as many as fill the writer's chunk size
+    PUBLICATIONS_PER_CHUNK: int | None = None
 
-    def __init__(self, writer) -> None:
-        from pulsejet_sim.bag.cdr import ColumnEncoder
-        from pulsejet_sim.core.topics import APPLIED_COMMAND_NAMES
-
-        self.writer = writer
-        self.encoder = ColumnEncoder()
-        self.command_values = operator.attrgetter(*APPLIED_COMMAND_NAMES)  # the encoder's columns
-        self.state_values = operator.attrgetter(*STATE_FIELDS)
-        self.publication = 0
-        self.last_values: tuple | None = None
-        self.command_rows: list[tuple] = []
-        self.state_rows: list[tuple] = []
-        self.since = time.monotonic()
-
-    def commands(self, start_s: float, command: Command) -> None:
-        """Add the command sent at start_s; the applied command too when it changed."""
-        self.publication += 1
-        values = self.command_values(command)
-        self.command_rows.append((self.publication, start_s, values != self.last_values, values))
-        self.last_values = values
-
-    def state(self, sim: Simulation, obs: Observation, ledger: bool) -> None:
-        """Add the state after a publication's steps (its profile, and the ledger if asked)."""
-        from pulsejet_sim.bag.cdr import stamp_ns
-
-        self.state_rows.append((
-            self.publication, obs.time_s, self.state_values(obs), sim.profile(),
-            self.encoder.encoder.ledger(sim.energy_ledger(), stamp_ns(obs.time_s))
-            if ledger else None,
-        ))
-        if (
-            len(self.state_rows) >= self.FLUSH_PUBLICATIONS
-            or time.monotonic() - self.since >= 0.5 * self.writer.flush_period_s
-        ):
-            self.flush()
-
-    def flush(self) -> None:
-        """Encode what was added, topic by topic, and write it as one batch."""
-        from pulsejet_sim.bag.batch import RecordBatch
-        from pulsejet_sim.bag.cdr import stamps_ns
+    def __init__(self, writer, sim: Simulation) -> None:
+        from pulsejet_sim.bag.cdr import stamp_ns, TopicEncoder
+        from pulsejet_sim.bag.publications import PublicationLayout, STATE_FIELDS, STATE_ORDER
         from pulsejet_sim.core.topics import (
-            TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER, TOPIC_MANTLE_PROFILE,
+            APPLIED_COMMAND_NAMES, COMMAND_TOPICS, TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER,
+            TOPIC_MANTLE_PROFILE,
         )
         import numpy as np
 
-        commands, self.command_rows = self.command_rows, []
-        states, self.state_rows = self.state_rows, []
+        self.writer, self.sim = writer, sim
+        model = sim.model
+        profile = sim.profile()
+        sample = getattr(model, 'profile_sample', None)
+        if profile is None:
+            self.sample = self.profiles_of = None
+        elif sample is not None and hasattr(model, 'profiles_of_samples'):
+            self.sample, self.profiles_of = sample, model.profiles_of_samples
+        else:  # a model without the array methods: its profile() each time, r then z
+            points = len(profile[0])
+
+            def sample(state):
+                return np.concatenate(model.profile(state))
+
+            self.sample = sample
+            self.profiles_of = lambda samples: (samples[:, :points], samples[:, points:])
+        # channels in the order a write_records call per publication adds them
+        topics = [*STATE_ORDER, *([TOPIC_MANTLE_PROFILE] if profile is not None else []),
+                  TOPIC_ENERGY_LEDGER, *COMMAND_TOPICS, TOPIC_APPLIED_COMMAND]
+        self.encoder = TopicEncoder()
+        self.layout = PublicationLayout(
+            writer.channel_ids(topics), None if profile is None else len(profile[0]),
+            self.encoder,
+        )
+        self.stamp_ns = stamp_ns
+        per_publication = self.layout.command.width + self.layout.state.width
+        capacity = self.PUBLICATIONS_PER_CHUNK or max(
+            1, writer.chunk_size_bytes // per_publication
+        )
+        self.capacity = capacity
+        self.command_values = operator.attrgetter(*APPLIED_COMMAND_NAMES)
+        self.state_values = operator.attrgetter('time_s', *STATE_FIELDS)
+        self.command_t = np.empty(capacity)  # -1: a publication without commands
+        self.commands = np.zeros((capacity, len(APPLIED_COMMAND_NAMES)))
+        self.states = np.empty((capacity, 1 + len(STATE_FIELDS)))
+        self.samples = (
+            None if self.sample is None
+            else np.empty((capacity, len(self.sample(sim.state))))
+        )
+        self.ledgers: dict[int, bytes] = {}
+        self.last_command: np.ndarray | None = None
+        self.n = 0
+        self.period_s = 0.5 * writer.flush_period_s
         self.since = time.monotonic()
-        batch = RecordBatch()
-        enc, slots = self.encoder, self.SLOTS
-        if commands:
-            keys = np.array([row[0] for row in commands]) * slots
-            ns = stamps_ns([row[1] for row in commands])
-            values = np.array([row[3] for row in commands], dtype=np.float64)
-            for slot, (topic, rows) in enumerate(enc.commands(values)):
-                batch.add(topic, keys + slot, ns, rows)
-            applied = np.array([row[2] for row in commands], dtype=bool)
-            batch.add(
-                TOPIC_APPLIED_COMMAND, keys[applied] + self.SLOT_APPLIED, ns[applied],
-                enc.applied_commands(ns[applied], values[applied]),
+
+    def add(self, start_s: float, command: Command | None, obs: Observation, ledger: bool) -> None:
+        """Add a publication: the command sent at start_s (None: none), the state after it."""
+        i = self.n
+        self.command_t[i] = start_s
+        if command is not None:
+            self.commands[i] = self.command_values(command)
+        self.states[i] = self.state_values(obs)
+        if self.samples is not None:
+            self.samples[i] = self.sample(self.sim.state)
+        if ledger:
+            self.ledgers[i] = self.encoder.ledger(
+                self.sim.energy_ledger(), self.stamp_ns(obs.time_s)
             )
-        if states:
-            keys = np.array([row[0] for row in states]) * slots
-            ns = stamps_ns([row[1] for row in states])
-            values = np.array([row[2] for row in states], dtype=np.float64)
-            named = dict(zip(STATE_FIELDS, values.T))
-            for slot, (topic, rows) in enumerate(enc.state(ns, named), start=self.SLOT_STATE):
-                batch.add(topic, keys + slot, ns, rows)
-            profiled = np.array([row[3] is not None for row in states], dtype=bool)
-            if profiled.any():
-                r_m = np.array([row[3][0] for row in states if row[3] is not None])
-                z_m = np.array([row[3][1] for row in states if row[3] is not None])
-                batch.add(
-                    TOPIC_MANTLE_PROFILE, keys[profiled] + self.SLOT_PROFILE, ns[profiled],
-                    enc.profiles(ns[profiled], r_m, z_m),
-                )
-            ledgers = [i for i, row in enumerate(states) if row[4] is not None]
-            batch.add(
-                TOPIC_ENERGY_LEDGER, keys[ledgers] + self.SLOT_LEDGER, ns[ledgers],
-                [states[i][4] for i in ledgers],
-            )
-        self.writer.write_batch(batch)
+        self.n = i + 1
+        if i + 1 == self.capacity or time.monotonic() - self.since >= self.period_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """Lay out the rows added since the last flush and write them as one chunk."""
+        from pulsejet_sim.bag.cdr import stamps_ns
+        import numpy as np
+
+        n = self.n
+        if not n:
+            return
+        commanded = self.command_t[:n] >= 0.0
+        command_ns = np.full(n, -1, dtype=np.int64)
+        command_ns[commanded] = stamps_ns(self.command_t[:n][commanded])
+        commands = self.commands[:n]
+        applied = np.zeros(n, dtype=bool)
+        sent = commands[commanded]
+        last = self.last_command
+        if len(sent):
+            # the applied command is published when the held command changes (sim_node)
+            before = np.empty_like(sent)
+            before[1:] = sent[:-1]
+            if last is not None:
+                before[0] = last
+            changed = np.any(sent != before, axis=1)
+            if last is None:
+                changed[0] = True
+            applied[commanded] = changed
+            last = sent[-1].copy()
+        states = self.states[:n]
+        stretch = self.layout.records(
+            command_ns, commands, applied, stamps_ns(states[:, 0]), states[:, 1:],
+            None if self.samples is None else self.profiles_of(self.samples[:n]),
+            {row: data for row, data in self.ledgers.items() if row < n},
+        )
+        # the rows are in the stretch: a signal closing the file from here on finds none left
+        self.n = 0
+        self.layout.counts = stretch.counts
+        self.ledgers, self.last_command = {}, last
+        self.since = time.monotonic()
+        self.writer.write_chunk(stretch)
 
 
 def default_output(scene: Scene) -> Path:
