@@ -141,6 +141,18 @@ def test_a_recorded_run_opens_in_rosbags_with_every_topic_and_matches_the_physic
     assert info.counts == {t: len(decoded[t]) for t in expected}
     own = [m.twist.linear.x for topic, _, _, m in read_bag(out) if topic == '/pulsejet/velocity']
     assert own == velocity
+    # the rosbag2 metadata record (YAML in its JSON subset) reads as YAML: names, types, counts
+    import yaml
+    from mcap.reader import make_reader
+
+    with open(out, 'rb') as fh:
+        (record,) = [m for m in make_reader(fh).iter_metadata() if m.name == 'rosbag2']
+    rosbag2 = yaml.safe_load(record.metadata['serialized_metadata'])['rosbag2_bagfile_information']
+    assert rosbag2['version'] == 9 and rosbag2['storage_identifier'] == 'mcap'
+    assert {t['topic_metadata']['name']: (t['topic_metadata']['type'], t['message_count'])
+            for t in rosbag2['topics_with_message_count']} == {
+        t: (expected[t], info.counts[t]) for t in expected}
+    assert rosbag2['message_count'] == sum(info.counts.values())
 
 
 def mcap_messages(path: Path) -> list[tuple]:

@@ -64,13 +64,15 @@ class Stretch:
     """
     The records of a stretch of publications, ready for BagWriter.write_chunk.
 
-    records: the Message records back to back; index: (channel id, (k, 2) uint64 array of
+    records: the Message records back to back, as a list of buffers (bytes or uint8 arrays;
+    the file holds them joined) of size bytes in all; index: (channel id, (k, 2) uint64 array of
     log time and offset in records) per channel, in order of first appearance; first_ns, last_ns:
     the smallest and largest log time; counts: each channel's message count after it (the
     layout's counts to continue from once the stretch is written).
     """
 
-    records: bytes
+    records: list
+    size: int
     index: list[tuple[int, np.ndarray]]
     first_ns: int
     last_ns: int
@@ -256,7 +258,7 @@ class PublicationLayout:
             done = row + 1
         if done < n:
             pieces.append(rows[done:].reshape(-1))
-        records = b''.join(pieces)
+        size = sum(len(piece) if isinstance(piece, bytes) else piece.nbytes for piece in pieces)
         # -- message indexes (log time, offset), channels in order of first appearance
         sizes = commanded * wc + applied * wa + ws
         if ledger_rows:
@@ -291,7 +293,8 @@ class PublicationLayout:
         if len(c_ns):
             times += [int(c_ns[0]), int(c_ns[-1])]
         return Stretch(
-            records=records,
+            records=pieces,
+            size=size,
             index=[(channel, table) for _, channel, table in index],
             first_ns=min(times),
             last_ns=max(times),

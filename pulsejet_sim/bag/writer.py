@@ -31,6 +31,7 @@ from __future__ import annotations
 import atexit
 import datetime
 import io
+import json
 import math
 import os
 from pathlib import Path
@@ -49,7 +50,7 @@ import numpy as np
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.batch import Merged, RecordBatch
 from pulsejet_sim.bag.records import FORMAT_VERSION
-from pulsejet_sim.core.schema import dump_yaml, load_own_yaml
+from pulsejet_sim.core.schema import load_own_yaml
 import yaml
 
 if TYPE_CHECKING:
@@ -103,7 +104,8 @@ class BagWriter:
             bag.write('pulsejet/velocity', serialize_message(msg), log_time_ns)
 
     Thread-safe: writes from several executor threads and a close() from another thread are
-    serialized.
+    serialized. close() syncs the file to the disk (os.fsync) unless sync_on_close=False: every
+    write is with the OS by then either way, so only a power loss or an OS crash tells them apart.
     """
 
     def __init__(
@@ -113,6 +115,7 @@ class BagWriter:
         compression: str = 'zstd',
         chunk_size_bytes: int = 256 * 1024,
         flush_period_s: float = 1.0,
+        sync_on_close: bool = True,
     ) -> None:
         if compression not in COMPRESSIONS:
             raise BagError(
@@ -134,6 +137,7 @@ class BagWriter:
         self.path = Path(path)
         self.compression = compression
         self.chunk_size_bytes = chunk_size_bytes
+        self.sync_on_close = bool(sync_on_close)
         self.flush_period_s = float(flush_period_s)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, 'wb')
@@ -153,6 +157,7 @@ class BagWriter:
         self._last_flush = time.monotonic()
         self._pending_since: float | None = None  # monotonic time of the oldest unflushed message
         self._fast = _FastChunk.attach(self._writer, chunk_size_bytes)
+        self._pending_chunk = None  # write_chunk's chunk being compressed, written next call
         self._closed = False
         self._busy_thread: int | None = None  # thread id inside write(), for signal deferral
         self._pending_signal: int | None = None
@@ -426,12 +431,14 @@ class BagWriter:
         channel's count and log times not before what was written. The chunk is compressed as
         the writer's other chunks, followed by its message indexes and counted in the summary
         (statistics, chunk index), as mcap's writer does for the same records; schema and
-        channel records added since the last chunk open it. With an mcap library that does not
-        look as expected, the records go through mcap's add_message one by one (the same
-        messages in different chunks).
+        channel records added since the last chunk open it. The compression (zstd and zlib's
+        CRC release the GIL) runs in a worker thread while the caller goes on; the chunk goes to
+        the file at the next call into the writer (the next write_chunk, a flush, close), so a
+        producer handing over a chunk every flush_period_s / 2 keeps the flush guarantee. With
+        an mcap library that does not look as expected, the records go through mcap's
+        add_message one by one (the same messages in different chunks).
         """
-        records = stretch.records
-        if not len(records):
+        if not stretch.size:
             return
         counts = {channel: len(table) for channel, table in stretch.index}
         names = {route[0]: route[1] for route in self._route.values()}
@@ -444,11 +451,13 @@ class BagWriter:
             raise BagError(
                 f'log_time_ns={stretch.first_ns!r} rejected; allowed: an integer >= 0 (ns)'
             )
-        with self._mutating():
+        with self._mutating():  # writes the chunk handed over before, if any
             if self._fast is not None:
-                self._fast.write_chunk(stretch, self.compression)
+                # compressed by a worker thread while the caller runs on; written by the next
+                # call into the writer (or close), in order
+                self._pending_chunk = self._fast.write_chunk(stretch, self.compression)
             else:
-                data = records
+                data = b''.join(stretch.records)
                 offset = 0
                 while offset < len(data):
                     _, length, channel, sequence, log_ns, publish_ns = _MESSAGE_HEAD.unpack_from(
@@ -462,7 +471,15 @@ class BagWriter:
             first, last = stretch.first_ns, stretch.last_ns
             self._first_ns = first if self._first_ns is None else min(self._first_ns, first)
             self._last_ns = last if self._last_ns is None else max(self._last_ns, last)
-            self._flush_locked()  # the chunk is closed: hand it to the OS now
+            if self._fast is None:
+                self._flush_locked()  # the chunk is closed: hand it to the OS now
+
+    def _write_pending_chunk(self) -> None:
+        """Write the chunk write_chunk handed over (waiting for its compression); lock held."""
+        pending, self._pending_chunk = self._pending_chunk, None
+        if pending is not None:
+            self._fast.finish_chunk_record(pending)
+            self._writer.flush()  # to the OS
 
     def _route_of(self, topic: str) -> tuple[int, str]:
         """(channel id, qualified name) of a topic as write_records gets it; adds the topic."""
@@ -527,6 +544,7 @@ class BagWriter:
                     self._flush_locked()
 
     def _flush_locked(self) -> None:
+        self._write_pending_chunk()
         self._writer.flush()
         self._last_flush = time.monotonic()
         self._pending_since = None
@@ -553,12 +571,14 @@ class BagWriter:
                 hooks, self._close_hooks = self._close_hooks, []
                 for hook in hooks:
                     hook()
+                self._write_pending_chunk()
                 self._writer.add_metadata(
                     'rosbag2', {'serialized_metadata': self._rosbag2_metadata()}
                 )
                 self._writer.finish()
                 self._file.flush()
-                os.fsync(self._file.fileno())
+                if self.sync_on_close:  # on the disk, not only with the OS (a power loss)
+                    os.fsync(self._file.fileno())
             finally:
                 self._closed = True
                 self._stop_flusher.set()
@@ -577,7 +597,9 @@ class BagWriter:
         """
         Return the `rosbag2_bagfile_information` YAML that rosbag2 stores in the file.
 
-        Metadata version 9.
+        Metadata version 9, written in YAML's JSON subset (flow style, which rosbag2's yaml-cpp
+        and PyYAML read as they read block style): json is about 20x faster than PyYAML's
+        representer, a fixed cost of every recording.
         """
         start = self._first_ns or 0
         duration = (self._last_ns - start) if self._last_ns is not None else 0
@@ -626,7 +648,7 @@ class BagWriter:
                 'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
             }
         }
-        return dump_yaml(data)
+        return json.dumps(data)
 
 
 class _Mutating:
@@ -652,6 +674,12 @@ class _Mutating:
             raise
         self.outer = bag._busy_thread is not None
         bag._busy_thread = threading.get_ident()
+        if bag._pending_chunk is not None:  # whatever comes next goes after it in the file
+            try:
+                bag._write_pending_chunk()
+            except BaseException:
+                self.__exit__()
+                raise
 
     def __exit__(self, *exc: object) -> None:
         bag = self.bag
@@ -842,34 +870,37 @@ class _FastChunk:
             if ends[m - 1] > chunk_size:
                 self.finalize()
 
-    def write_chunk(self, stretch: 'Stretch', compression: str) -> None:
+    def write_chunk(self, stretch: 'Stretch', compression: str) -> tuple:
         """
-        Write the stretch as one Chunk record, its MessageIndex records and its ChunkIndex.
+        Start the chunk of a stretch: its data handed to the compression worker.
 
-        What mcap.writer.Writer's __finalize_chunk writes for a chunk holding these records:
-        a message still open in mcap's chunk is written in a chunk of its own first; schema
-        and channel records waiting there open this one.
+        What mcap.writer.Writer's __finalize_chunk writes for a chunk holding these records
+        (finish_chunk_record writes it): a message still open in mcap's chunk is written in a
+        chunk of its own first; schema and channel records waiting there open this one.
+        Returns what finish_chunk_record needs.
         """
-        builder, stats = self.builder, self.stats
+        builder = self.builder
         if builder.num_messages:
             self.finish_chunk()
         prefix = builder.record_writer.end()  # schema and channel records added since
         builder.reset()
-        data = prefix + stretch.records if prefix else stretch.records
-        size = len(data)
-        crc = zlib.crc32(data)
-        if compression == 'zstd':
-            if self.compressor is None:
-                import zstandard
+        pieces = [prefix, *stretch.records] if prefix else stretch.records
+        size = len(prefix) + stretch.size
+        if compression == 'zstd' and self.compressor is None:
+            import zstandard
 
-                self.compressor = zstandard.ZstdCompressor(level=1)
-            packed = self.compressor.compress(data)
-        elif compression == 'lz4':
-            import lz4.frame
+            # level 1: rosbag2's default (mcap's C++ writer, CompressionLevel::Default)
+            self.compressor = zstandard.ZstdCompressor(level=1)
+        job = _Job(lambda: _compress(pieces, size, compression, self.compressor))
+        if _ChunkCompressor.in_thread:
+            _ChunkCompressor.shared().submit(job)
+        return job, stretch, len(prefix), size
 
-            packed = lz4.frame.compress(data)
-        else:
-            compression, packed = '', data
+    def finish_chunk_record(self, started: tuple) -> None:
+        """Write a chunk write_chunk started: Chunk record, MessageIndex records, ChunkIndex."""
+        job, stretch, shift, size = started
+        crc, compression, packed = job.result()
+        stats = self.stats
         tag = compression.encode()
         head = struct.pack(
             '<BQQQQII', 6, 8 + 8 + 8 + 4 + 4 + len(tag) + 8 + len(packed),
@@ -883,7 +914,6 @@ class _FastChunk:
         chunk_length = len(head) + len(packed)
         index_start = chunk_start + chunk_length
         offsets, parts, at = {}, [], index_start
-        shift = len(prefix)
         for channel, table in stretch.index:
             if shift:
                 table = table + np.array([0, shift], dtype='<u8')
@@ -909,6 +939,97 @@ class _FastChunk:
         for channel, table in stretch.index:
             stats.channel_message_counts[channel] += len(table)
         stats.chunk_count += 1
+
+
+def _compress(pieces: list, size: int, compression: str, compressor) -> tuple[int, str, bytes]:
+    """
+    Return (CRC-32, compression name, compressed bytes) of the data of an MCAP chunk.
+
+    pieces: the data as buffers, compressed and checksummed one after the other (no joined
+    copy); a zstd frame states its size (mcap's reader needs it), as a one-shot compress does.
+    """
+    crc = 0
+    for piece in pieces:
+        crc = zlib.crc32(piece, crc)
+    if compression == 'zstd':
+        stream = compressor.compressobj(size=size)
+        packed = [stream.compress(piece) for piece in pieces]
+        packed.append(stream.flush())
+        return crc, compression, b''.join(packed)
+    data = b''.join(pieces)
+    if compression == 'lz4':
+        import lz4.frame
+
+        return crc, compression, lz4.frame.compress(data)
+    return crc, '', data
+
+
+class _Job:
+    """
+    A call for _ChunkCompressor: run by whichever comes first, the worker or result().
+
+    result() returns or raises the call's outcome; if the worker has not started the call yet
+    (a busy machine can leave a woken thread waiting for a core), the caller runs it itself
+    instead of waiting for the worker to be scheduled.
+    """
+
+    __slots__ = ('call', 'claim', 'done', 'value', 'error')
+
+    def __init__(self, call: Callable[[], Any]) -> None:
+        self.call, self.claim, self.done = call, threading.Lock(), threading.Event()
+        self.value = self.error = None
+
+    def run(self) -> None:
+        if not self.claim.acquire(blocking=False):
+            return  # taken by result()
+        try:
+            self.value = self.call()
+        except BaseException as err:  # handed to the waiting caller
+            self.error = err
+        finally:
+            self.done.set()
+
+    def result(self) -> Any:
+        self.run()
+        self.done.wait()
+        if self.error is not None:
+            raise self.error
+        return self.value
+
+
+class _ChunkCompressor:
+    """
+    One daemon thread per process that compresses write_chunk's chunks, in order.
+
+    zstd, lz4 and zlib's CRC-32 release the GIL, so a chunk compresses on another core while
+    the producer (the offline runner's physics) goes on. Started with the first chunk, kept for
+    the next writers (one thread start per process); a forked child starts its own.
+    """
+
+    _lock = threading.Lock()
+    _shared: '_ChunkCompressor | None' = None
+    in_thread = True  # False: each chunk compressed by the caller, when it is handed over
+
+    @classmethod
+    def shared(cls) -> '_ChunkCompressor':
+        with cls._lock:
+            if cls._shared is None or not cls._shared.thread.is_alive():
+                cls._shared = cls()
+            return cls._shared
+
+    def __init__(self) -> None:
+        from queue import SimpleQueue
+
+        self.jobs: SimpleQueue = SimpleQueue()
+        self.thread = threading.Thread(target=self._run, name='bag-compress', daemon=True)
+        self.thread.start()
+
+    def submit(self, job: _Job) -> None:
+        self.jobs.put(job)
+
+    def _run(self) -> None:
+        while True:
+            self.jobs.get().run()
 
 
 def _extend_statistics(stats, first_ns: int, last_ns: int, count: int) -> None:

@@ -23,6 +23,9 @@ from pulsejet_sim.routines import routine_from_scene
 from pulsejet_sim.scene import Scene
 
 LEDGER_PERIOD_S = 0.2  # energy ledger messages at 5 Hz, as sim_node publishes them
+#: MCAP chunk size of a recorded run: rosbag2's default (mcap's C++ writer, 768 KiB); fewer
+#: chunks than the writer's default cost less per run (benchmarks/results/recording.md)
+RUN_CHUNK_BYTES = 768 * 1024
 
 
 def steps_per_publication(scene: Scene) -> int:
@@ -102,7 +105,9 @@ def _record(drive: Drive, out: Path) -> RunResult:
 
     sim, scene = drive.sim, drive.scene
     ledger_every = max(1, int(round(LEDGER_PERIOD_S / (drive.batch * scene.model.dt_s))))
-    writer = BagWriter(out)
+    # no fsync at close: a killed run's writes are with the OS already, and an offline run
+    # reruns bit for bit from its scene (the sync cost ~5 % of a 10 s shell_robot run)
+    writer = BagWriter(out, chunk_size_bytes=RUN_CHUNK_BYTES, sync_on_close=False)
     # the scene travels with the recording, so `pulsejet resim FILE` needs nothing else
     writer.add_metadata(
         'pulsejet',
@@ -119,15 +124,12 @@ def _record(drive: Drive, out: Path) -> RunResult:
         if threading.current_thread() is threading.main_thread()
         else None
     )
-    published, last = 0, drive.batches
+    published = 0
     try:
-        columns.add(-1.0, None, sim.observe(), True)
-        add = columns.add
-        for start_s, command, obs in drive:
-            published += 1
-            add(start_s, command, obs, published % ledger_every == 0 or published == last)
+        columns.add(None, sim.observe())
+        published = columns.record(drive, ledger_every)
         if drive.fault is not None:
-            columns.add(-1.0, None, sim.observe(), True)
+            columns.add(None, sim.observe())
     finally:
         writer.close()  # hands the last columns over first (on_close)
         if restore_signals is not None:
@@ -189,10 +191,12 @@ class _RunColumns:
         )
         self.capacity = capacity
         self.command_values = operator.attrgetter(*APPLIED_COMMAND_NAMES)
+        self.no_command = (0.0,) * len(APPLIED_COMMAND_NAMES)
+        self.command_columns = slice(1, 1 + len(APPLIED_COMMAND_NAMES))
         self.state_values = operator.attrgetter('time_s', *STATE_FIELDS)
-        self.command_t = np.empty(capacity)  # -1: a publication without commands
-        self.commands = np.zeros((capacity, len(APPLIED_COMMAND_NAMES)))
-        self.states = np.empty((capacity, 1 + len(STATE_FIELDS)))
+        # a row per publication: the commands' time (-1: none), the command values in
+        # APPLIED_COMMAND_NAMES' order, the state's time and STATE_FIELDS
+        self.rows = np.empty((capacity, 1 + len(APPLIED_COMMAND_NAMES) + 1 + len(STATE_FIELDS)))
         self.samples = (
             None if self.sample is None
             else np.empty((capacity, len(self.sample(sim.state))))
@@ -203,21 +207,50 @@ class _RunColumns:
         self.period_s = 0.5 * writer.flush_period_s
         self.since = time.monotonic()
 
-    def add(self, start_s: float, command: Command | None, obs: Observation, ledger: bool) -> None:
-        """Add a publication: the command sent at start_s (None: none), the state after it."""
+    def add(self, command: Command | None, obs: Observation, start_s: float = -1.0) -> None:
+        """Add a publication, its ledger: the command sent at start_s (None: none), the state."""
         i = self.n
-        self.command_t[i] = start_s
-        if command is not None:
-            self.commands[i] = self.command_values(command)
-        self.states[i] = self.state_values(obs)
+        values = self.command_values(command) if command is not None else self.no_command
+        self.rows[i] = (start_s, *values, *self.state_values(obs))
         if self.samples is not None:
             self.samples[i] = self.sample(self.sim.state)
-        if ledger:
-            self.ledgers[i] = self.encoder.ledger(
-                self.sim.energy_ledger(), self.stamp_ns(obs.time_s)
-            )
+        self.ledgers[i] = self.ledger(obs)
         self.n = i + 1
-        if i + 1 == self.capacity or time.monotonic() - self.since >= self.period_s:
+        self.flush_if_due()
+
+    def record(self, drive: Drive, ledger_every: int) -> int:
+        """
+        Add the publications of a drive (the ledger every ledger_every and with the last).
+
+        Returns how many it yielded. The loop of add() with its lookups hoisted: it runs once
+        per publication, next to the physics it records.
+        """
+        rows, samples, sample, sim = self.rows, self.samples, self.sample, self.sim
+        command_values, state_values = self.command_values, self.state_values
+        capacity, monotonic, last = self.capacity, time.monotonic, drive.batches
+        period_s = self.period_s
+        # a chunk handed over this many publications before the end: its compression (in the
+        # writer's worker) overlaps the last ones, and close() compresses only a short tail
+        tail = last - max(1, capacity // 8)
+        published = 0
+        for start_s, command, obs in drive:
+            published += 1
+            i = self.n
+            rows[i] = (start_s, *command_values(command), *state_values(obs))
+            if samples is not None:
+                samples[i] = sample(sim.state)
+            if published % ledger_every == 0 or published == last:
+                self.ledgers[i] = self.ledger(obs)
+            self.n = i + 1  # the publication counts from here on (a signal's flush takes it)
+            if i + 1 == capacity or published == tail or monotonic() - self.since >= period_s:
+                self.flush()
+        return published
+
+    def ledger(self, obs: Observation) -> bytes:
+        return self.encoder.ledger(self.sim.energy_ledger(), self.stamp_ns(obs.time_s))
+
+    def flush_if_due(self) -> None:
+        if self.n == self.capacity or time.monotonic() - self.since >= self.period_s:
             self.flush()
 
     def flush(self) -> None:
@@ -228,10 +261,11 @@ class _RunColumns:
         n = self.n
         if not n:
             return
-        commanded = self.command_t[:n] >= 0.0
+        rows = self.rows[:n]
+        commanded = rows[:, 0] >= 0.0
         command_ns = np.full(n, -1, dtype=np.int64)
-        command_ns[commanded] = stamps_ns(self.command_t[:n][commanded])
-        commands = self.commands[:n]
+        command_ns[commanded] = stamps_ns(rows[commanded, 0])
+        commands = rows[:, self.command_columns]
         applied = np.zeros(n, dtype=bool)
         sent = commands[commanded]
         last = self.last_command
@@ -246,7 +280,7 @@ class _RunColumns:
                 changed[0] = True
             applied[commanded] = changed
             last = sent[-1].copy()
-        states = self.states[:n]
+        states = rows[:, self.command_columns.stop:]
         stretch = self.layout.records(
             command_ns, commands, applied, stamps_ns(states[:, 0]), states[:, 1:],
             None if self.samples is None else self.profiles_of(self.samples[:n]),
