@@ -341,3 +341,87 @@ def test_ctrl_c_mid_run_writes_every_publication_collected(tmp_path):
     (state_count,) = states
     assert state_count >= count >= 200  # the initial state and every publication yielded
     assert info.counts['/pulsejet/cmd/cable_force'] in (state_count - 1, state_count)
+
+
+@pytest.mark.parametrize('compression, fast', [('zstd', True), ('lz4', True), ('none', True),
+                                               ('zstd', False)])
+def test_publication_layout_writes_the_per_message_encoders_bytes(
+    tmp_path, monkeypatch, compression, fast
+):
+    """
+    bag.publications + write_chunk: every kind of publication, read back by rosbags and mcap.
+
+    Publications without commands (the initial state), with the applied command (the first and
+    on a change), with a ledger, over two chunks; each message the bytes TopicEncoder writes.
+    """
+    from pulsejet_sim.bag.publications import PublicationLayout, STATE_FIELDS, STATE_ORDER
+    from pulsejet_sim.core.model_io import Command, Observation
+    from pulsejet_sim.core.topics import (
+        APPLIED_COMMAND_NAMES, COMMAND_TOPICS, TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER,
+        TOPIC_MANTLE_PROFILE,
+    )
+
+    if not fast:
+        monkeypatch.setattr(bag_writer._FastChunk, 'attach', classmethod(lambda c, w, s: None))
+    rng = np.random.default_rng(3)
+    n, points = 12, 5
+    times = np.arange(n) * 0.01 + 0.01
+    commands = np.abs(rng.normal(size=(n, 3)))
+    commands[4] = commands[3]  # held: no applied command at row 4
+    commands[:, 1] = 1.0
+    states = rng.normal(size=(n, len(STATE_FIELDS)))
+    r_m, z_m = rng.normal(size=(n, points)), rng.normal(size=(n, points))
+    command_ns = cdr.stamps_ns(times - 0.01)
+    command_ns[0] = -1  # the initial state: no commands
+    state_ns = cdr.stamps_ns(times)
+    encoder = cdr.TopicEncoder()
+    ledgers = {row: encoder.ledger({'stored_elastic': float(row), 'closure_relative': 0.0},
+                                   int(state_ns[row])) for row in (0, 5, 11)}
+    applied = np.ones(n, dtype=bool)
+    applied[4] = False
+    out = tmp_path / 'layout.mcap'
+    with bag_writer.BagWriter(out, compression=compression) as bag:
+        topics = [*STATE_ORDER, TOPIC_MANTLE_PROFILE, TOPIC_ENERGY_LEDGER, *COMMAND_TOPICS,
+                  TOPIC_APPLIED_COMMAND]
+        layout = PublicationLayout(bag.channel_ids(topics), points, encoder)
+        for part in (slice(0, 7), slice(7, n)):
+            rows = range(n)[part]
+            stretch = layout.records(
+                command_ns[part], commands[part], applied[part], state_ns[part], states[part],
+                (r_m[part], z_m[part]),
+                {row - rows.start: data for row, data in ledgers.items() if row in rows},
+            )
+            layout.counts = stretch.counts
+            bag.write_chunk(stretch)
+    expected = []
+    for i in range(n):
+        if command_ns[i] >= 0:
+            cmd = Command(*map(float, commands[i]))
+            ns = int(command_ns[i])
+            expected += [(t, ns, data) for t, data in encoder.commands(cmd)]
+            if applied[i]:
+                expected.append((TOPIC_APPLIED_COMMAND, ns, encoder.applied_command(cmd, ns)))
+        obs = Observation(**{**dict.fromkeys(Observation.__dataclass_fields__, 0.0),
+                             **dict(zip(STATE_FIELDS, map(float, states[i]))),
+                             'time_s': float(times[i])})
+        ns = int(state_ns[i])
+        expected += [(t, ns, data) for t, data in encoder.observation(obs, ns)]
+        expected.append((TOPIC_MANTLE_PROFILE, ns, encoder.profile(r_m[i], z_m[i], ns)))
+        if i in ledgers:
+            expected.append((TOPIC_ENERGY_LEDGER, ns, ledgers[i]))
+    got = mcap_messages(out)
+    assert [(t, log, data) for t, log, _, _, data in got] == [
+        ('/' + t if not t.startswith('/') else t, ns, data) for t, ns, data in expected]
+    sequences: dict[str, int] = {}
+    for topic, log, publish, sequence, _ in got:
+        sequences[topic] = sequences.get(topic, 0) + 1
+        assert sequence == sequences[topic] and publish == log
+    summary = mcap_summary(out)
+    assert summary.statistics.chunk_count == 2
+    with AnyReader([out], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        decoded = [(c.topic, reader.deserialize(raw, c.msgtype)) for c, _, raw in
+                   reader.messages()]
+    assert len(decoded) == len(expected)
+    positions = [list(m.position) for t, m in decoded if t == '/pulsejet/applied_command']
+    assert positions == [list(commands[i]) for i in range(n) if command_ns[i] >= 0 and applied[i]]
+    assert APPLIED_COMMAND_NAMES == ('pump_flow_m3_s', 'valve_opening', 'cable_force_n')
