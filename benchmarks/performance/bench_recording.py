@@ -8,8 +8,9 @@ outside the timing, as `pulsejet run` writes a new file):
 - physics: runner.run_scene without an output (Simulation.step per publication period, the
   observation after each; no recording);
 - record: runner.run_scene with an MCAP output (what `pulsejet run` times: physics, each
-  publication's command, state and profile sample in rows of preallocated arrays, the ledger
-  every LEDGER_PERIOD_S, a chunk of publications laid out with numpy by bag.publications and
+  publication's command, state and profile sample in rows of preallocated arrays, the state
+  every LEDGER_PERIOD_S for its energy ledger (booked at each flush), a chunk of publications
+  laid out with numpy by bag.publications and
   written by BagWriter.write_chunk, compressed in the writer's worker thread, the file closed);
   its main-thread CPU time (time.thread_time) against the physics' is given too: the ratio a
   machine with a free core for the compression would see, whatever the load;
@@ -19,8 +20,9 @@ outside the timing, as `pulsejet run` writes a new file):
 - rclpy record (only when rclpy imports): the same topics written the way the runner did before,
   an rclpy message per sample (ros/messages.py) serialised by rclpy, for comparison;
 - without writing: run_scene with the collected rows dropped at every flush (the collection per
-  publication with the model's profile sample and ledger, the file opened and closed, no layout,
-  compression or chunk): the bound on the ratio however fast the layout and the writing get;
+  publication with the model's profile sample and, for the ledger, a copy of the state; the file
+  opened and closed; no ledger booked, no layout, compression or chunk): the bound on the ratio
+  however fast the ledger, the layout and the writing get;
 - summary: analysis.summarize of the recording (the read-back `pulsejet run` prints after the run;
   not part of the ratio).
 
@@ -271,17 +273,19 @@ def main(argv=None) -> int:
         f'{args.duration:g} s simulated per run, median of {args.repeats} interleaved repeats '
         '(wall s, real-time factor in brackets), each recording to a new file. physics: '
         'runner.run_scene without an output (observation per publication, no recording); '
-        'record: runner.run_scene to MCAP (rows per publication, a 768 KiB chunk of them laid out '
-        "with numpy by bag.publications, zstd level 1 in the writer's worker thread); CPU: "
+        'record: runner.run_scene to MCAP (rows per publication; at each flush the ledgers '
+        'booked and a 768 KiB chunk laid out with numpy by bag.publications, zstd level 1 in '
+        "the writer's worker thread); CPU: "
         "the same two runs' main-thread CPU time (time.thread_time), physics / record: the "
         'ratio with a core free for the compression, whatever the load; per publication: the '
         'same messages with one write_records call per publication (the runner before '
         'columns); rclpy record: the same topics built as rclpy messages and serialised by '
         'rclpy (the runner before bag.cdr); without writing: run_scene with the collected rows '
         "dropped at each flush (the collection per publication with the model's profile sample "
-        'and ledger, file open and close: the bound on the ratio however fast the layout and '
-        'the chunks get); summary: analysis.summarize reading the file back (printed by '
-        '`pulsejet run` after the timed run, not in the ratio). Ratio = physics / record '
+        'and a copy of the state for the ledger, file open and close: the bound on the ratio '
+        'however fast the ledger, the layout and the chunks get); summary: analysis.summarize '
+        'reading the file back (printed by `pulsejet run` after the timed run, not in the '
+        'ratio). Ratio = physics / record '
         f'(target >= {TARGET_RATIO}).\n\n'
         '| scene | physics | record | ratio | CPU ratio | per publication | ratio | rclpy record '
         '| ratio | without writing | ratio | summary | MCAP size |\n'
