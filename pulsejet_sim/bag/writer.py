@@ -891,7 +891,8 @@ class _FastChunk:
 
             # level 1: rosbag2's default (mcap's C++ writer, CompressionLevel::Default)
             self.compressor = zstandard.ZstdCompressor(level=1)
-        job = _Job(lambda: _compress(pieces, size, compression, self.compressor))
+        data = b''.join(pieces)  # here: the worker holding the GIL for the copy could stall us
+        job = _Job(lambda: _compress(data, compression, self.compressor))
         if _ChunkCompressor.in_thread:
             _ChunkCompressor.shared().submit(job)
         return job, stretch, len(prefix), size
@@ -941,15 +942,14 @@ class _FastChunk:
         stats.chunk_count += 1
 
 
-def _compress(pieces: list, size: int, compression: str, compressor) -> tuple[int, str, bytes]:
+def _compress(data: bytes, compression: str, compressor) -> tuple[int, str, bytes]:
     """
     Return (CRC-32, compression name, compressed bytes) of the data of an MCAP chunk.
 
-    pieces: the data as buffers, joined here (in the worker: the producer pays no copy). Then
-    two calls that release the GIL (zlib's CRC-32 and the compression), so the worker takes the
-    GIL back only a few times per chunk.
+    Two calls that release the GIL (zlib's CRC-32, the compression): in the worker, the GIL is
+    held only for a few bytecodes around them, so a worker descheduled on a busy machine hardly
+    ever holds up the producer.
     """
-    data = b''.join(pieces)
     crc = zlib.crc32(data)
     if compression == 'zstd':
         return crc, compression, compressor.compress(data)

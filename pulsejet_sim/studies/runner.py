@@ -238,7 +238,7 @@ class _RunColumns:
         period_s = self.period_s
         # a chunk handed over this many publications before the end: its compression (in the
         # writer's worker) overlaps the last ones, and close() compresses only a short tail
-        tail = last - max(1, capacity // 8)
+        tail = last - max(1, capacity // 3)
         published = 0
         for start_s, command, obs in drive:
             published += 1
