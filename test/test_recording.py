@@ -100,6 +100,9 @@ def test_write_records_refuses_bad_input_with_the_value(tmp_path):
             bag.write_records([(cdr.TOPIC_VOLUME, cdr.TopicEncoder().float64(1.0))], -1)
     with pytest.raises(bag_writer.BagError, match='closed'):
         bag.write_records([(cdr.TOPIC_VOLUME, cdr.TopicEncoder().float64(1.0))], 0)
+    for level in (23, -101, 1.5, True, '1'):
+        with pytest.raises(bag_writer.BagError, match=f'zstd_level={level!r} rejected'):
+            bag_writer.BagWriter(tmp_path / 'y.mcap', zstd_level=level)
 
 
 @pytest.mark.timeout(300)

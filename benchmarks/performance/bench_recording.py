@@ -284,7 +284,7 @@ def main(argv=None) -> int:
         'collected before each timed run. physics: '
         'runner.run_scene without an output (observation per publication, no recording); '
         'record: runner.run_scene to MCAP (rows per publication; at each flush the ledgers '
-        'booked and a 768 KiB chunk laid out with numpy by bag.publications, zstd level 1 in '
+        'booked and a 768 KiB chunk laid out with numpy by bag.publications, zstd level -3 in '
         "the writer's worker thread); CPU: "
         "the same two runs' main-thread CPU time (time.thread_time), physics / record: the "
         'ratio with a core free for the compression, whatever the load; per publication: the '

@@ -106,6 +106,9 @@ class BagWriter:
     Thread-safe: writes from several executor threads and a close() from another thread are
     serialized. close() syncs the file to the disk (os.fsync) unless sync_on_close=False: every
     write is with the OS by then either way, so only a power loss or an OS crash tells them apart.
+    zstd_level: the level of write_chunk's zstd chunks (default 1, rosbag2's: mcap's C++ writer,
+    CompressionLevel::Default; -3 is its Fast); messages written one by one go through mcap's
+    writer (level 3).
     """
 
     def __init__(
@@ -116,6 +119,7 @@ class BagWriter:
         chunk_size_bytes: int = 256 * 1024,
         flush_period_s: float = 1.0,
         sync_on_close: bool = True,
+        zstd_level: int = 1,
     ) -> None:
         if compression not in COMPRESSIONS:
             raise BagError(
@@ -138,6 +142,12 @@ class BagWriter:
         self.compression = compression
         self.chunk_size_bytes = chunk_size_bytes
         self.sync_on_close = bool(sync_on_close)
+        if not (isinstance(zstd_level, int) and not isinstance(zstd_level, bool)
+                and -100 <= zstd_level <= 22):
+            raise BagError(
+                f'zstd_level={zstd_level!r} rejected; allowed: an integer in [-100, 22]'
+            )
+        self.zstd_level = zstd_level
         self.flush_period_s = float(flush_period_s)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, 'wb')
@@ -455,7 +465,9 @@ class BagWriter:
             if self._fast is not None:
                 # compressed by a worker thread while the caller runs on; written by the next
                 # call into the writer (or close), in order
-                self._pending_chunk = self._fast.write_chunk(stretch, self.compression)
+                self._pending_chunk = self._fast.write_chunk(
+                    stretch, self.compression, self.zstd_level
+                )
             else:
                 data = b''.join(stretch.records)
                 offset = 0
@@ -870,7 +882,7 @@ class _FastChunk:
             if ends[m - 1] > chunk_size:
                 self.finalize()
 
-    def write_chunk(self, stretch: 'Stretch', compression: str) -> tuple:
+    def write_chunk(self, stretch: 'Stretch', compression: str, level: int) -> tuple:
         """
         Start the chunk of a stretch: its data handed to the compression worker.
 
@@ -889,8 +901,7 @@ class _FastChunk:
         if compression == 'zstd' and self.compressor is None:
             import zstandard
 
-            # level 1: rosbag2's default (mcap's C++ writer, CompressionLevel::Default)
-            self.compressor = zstandard.ZstdCompressor(level=1)
+            self.compressor = zstandard.ZstdCompressor(level=level)
         data = b''.join(pieces)  # here: the worker holding the GIL for the copy could stall us
         job = _Job(lambda: _compress(data, compression, self.compressor))
         if _ChunkCompressor.in_thread:

@@ -27,6 +27,9 @@ LEDGER_PERIOD_S = 0.2  # energy ledger messages at 5 Hz, as sim_node publishes t
 #: MCAP chunk size of a recorded run: rosbag2's default (mcap's C++ writer, 768 KiB); fewer
 #: chunks than the writer's default cost less per run (benchmarks/results/recording.md)
 RUN_CHUNK_BYTES = 768 * 1024
+#: zstd level of a recorded run's chunks: mcap's C++ CompressionLevel::Fast (rosbag2's default is
+#: 1): a third less compression CPU for files about 12 % larger (benchmarks/results/recording.md)
+RUN_ZSTD_LEVEL = -3
 
 
 def steps_per_publication(scene: Scene) -> int:
@@ -108,7 +111,9 @@ def _record(drive: Drive, out: Path) -> RunResult:
     ledger_every = max(1, int(round(LEDGER_PERIOD_S / (drive.batch * scene.model.dt_s))))
     # no fsync at close: a killed run's writes are with the OS already, and an offline run
     # reruns bit for bit from its scene (the sync cost ~5 % of a 10 s shell_robot run)
-    writer = BagWriter(out, chunk_size_bytes=RUN_CHUNK_BYTES, sync_on_close=False)
+    writer = BagWriter(
+        out, chunk_size_bytes=RUN_CHUNK_BYTES, sync_on_close=False, zstd_level=RUN_ZSTD_LEVEL
+    )
     # the scene travels with the recording, so `pulsejet resim FILE` needs nothing else
     writer.add_metadata(
         'pulsejet',
