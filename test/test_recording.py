@@ -1,10 +1,12 @@
 """
-The offline recording path: batched CDR records, the same file, readable by rosbags and our reader.
+The offline recording path: batched CDR records, the same messages, readable by rosbags and ours.
 
-`pulsejet run` writes bag.cdr bytes through BagWriter.write_records (one lock per batch, the
-Message records appended to mcap's open chunk directly). These tests hold that path to the file
-the public per-message path writes, byte for byte, and the recording of both default scenes to
-what a ROS reader and the project's reader decode, value for value against the physics.
+`pulsejet run` lays out a chunk of publications at a time with numpy (bag.publications) and
+writes it with BagWriter.write_chunk; BagWriter.write_records / write_batch append bag.cdr bytes
+to mcap's open chunk. These tests hold the batched paths to the file the public per-message path
+writes, byte for byte, the runner's chunks to the messages of a write_records call per
+publication, message for message, and the recording of both default scenes to what a ROS reader
+and the project's reader decode, value for value against the physics.
 """
 
 import datetime
@@ -98,6 +100,9 @@ def test_write_records_refuses_bad_input_with_the_value(tmp_path):
             bag.write_records([(cdr.TOPIC_VOLUME, cdr.TopicEncoder().float64(1.0))], -1)
     with pytest.raises(bag_writer.BagError, match='closed'):
         bag.write_records([(cdr.TOPIC_VOLUME, cdr.TopicEncoder().float64(1.0))], 0)
+    for level in (23, -101, 1.5, True, '1'):
+        with pytest.raises(bag_writer.BagError, match=f'zstd_level={level!r} rejected'):
+            bag_writer.BagWriter(tmp_path / 'y.mcap', zstd_level=level)
 
 
 @pytest.mark.timeout(300)
@@ -139,26 +144,79 @@ def test_a_recorded_run_opens_in_rosbags_with_every_topic_and_matches_the_physic
     assert info.counts == {t: len(decoded[t]) for t in expected}
     own = [m.twist.linear.x for topic, _, _, m in read_bag(out) if topic == '/pulsejet/velocity']
     assert own == velocity
+    # the rosbag2 metadata record (YAML in its JSON subset) reads as YAML: names, types, counts
+    import yaml
+    from mcap.reader import make_reader
+
+    with open(out, 'rb') as fh:
+        (record,) = [m for m in make_reader(fh).iter_metadata() if m.name == 'rosbag2']
+    rosbag2 = yaml.safe_load(record.metadata['serialized_metadata'])['rosbag2_bagfile_information']
+    assert rosbag2['version'] == 9 and rosbag2['storage_identifier'] == 'mcap'
+    assert {t['topic_metadata']['name']: (t['topic_metadata']['type'], t['message_count'])
+            for t in rosbag2['topics_with_message_count']} == {
+        t: (expected[t], info.counts[t]) for t in expected}
+    assert rosbag2['message_count'] == sum(info.counts.values())
+
+
+def mcap_messages(path: Path) -> list[tuple]:
+    """(topic, log time, publish time, sequence, bytes) of every message, in file order."""
+    from mcap.reader import make_reader
+
+    with open(path, 'rb') as fh:
+        return [
+            (channel.topic, m.log_time, m.publish_time, m.sequence, m.data)
+            for _, channel, m in make_reader(fh).iter_messages(log_time_order=False)
+        ]
+
+
+def mcap_summary(path: Path):
+    from mcap.reader import make_reader
+
+    with open(path, 'rb') as fh:
+        return make_reader(fh).get_summary()
 
 
 @pytest.mark.timeout(300)
 @pytest.mark.parametrize('name, duration_s', [('shell_robot', 4.0), ('pump_cycle', 3.0)])
-def test_run_scene_writes_the_file_one_write_records_per_publication_writes(
-    tmp_path, fixed_close_time, name, duration_s
+def test_run_scene_records_the_messages_one_write_records_per_publication_writes(
+    tmp_path, name, duration_s
 ):
-    """The columnar recording (several chunks, batches across chunk ends) changes no byte."""
+    """
+    The laid-out chunks (bag.publications) hold the per-message encoder's messages, in order.
+
+    Same topics, log and publish times, sequences and bytes (TopicEncoder's, which test_cdr holds
+    to rclpy's), the same schemas and channels; several chunks, each with its message indexes.
+    """
     (tmp_path / 'a').mkdir()
     (tmp_path / 'b').mkdir()
     from benchmarks.performance.bench_recording import write_per_publication
 
-    write_per_publication(tmp_path / 'a' / 'run.mcap', name, duration_s)
-    run_scene(load_scene(name), duration_s, tmp_path / 'b' / 'run.mcap')
-    reference = (tmp_path / 'a' / 'run.mcap').read_bytes()
+    reference, recorded = tmp_path / 'a' / 'run.mcap', tmp_path / 'b' / 'run.mcap'
+    write_per_publication(reference, name, duration_s)
+    result = run_scene(load_scene(name), duration_s, recorded)
+    expected = mcap_messages(reference)
+    assert mcap_messages(recorded) == expected
+    assert len(expected) > 11 * result.publications  # commands, state, profile; ledgers
+    want, got = mcap_summary(reference), mcap_summary(recorded)
+    assert got.schemas == want.schemas and got.channels == want.channels
+    assert got.statistics.message_count == len(expected)
+    assert got.statistics.channel_message_counts == want.statistics.channel_message_counts
+    assert got.statistics.chunk_count > 1
+    chunks = got.chunk_indexes
+    assert [c.message_start_time for c in chunks] == sorted(c.message_start_time for c in chunks)
+    assert all(c.compression == 'zstd' and c.message_index_offsets for c in chunks)
+    # the message indexes point at every message (mcap's indexed reader goes through them)
     from mcap.reader import make_reader
 
-    with open(tmp_path / 'a' / 'run.mcap', 'rb') as fh:
-        assert make_reader(fh).get_summary().statistics.chunk_count > 1
-    assert (tmp_path / 'b' / 'run.mcap').read_bytes() == reference
+    with open(recorded, 'rb') as fh:
+        indexed = [
+            (channel.topic, m.log_time, m.sequence, m.data)
+            for _, channel, m in make_reader(fh).iter_messages(log_time_order=True)
+        ]
+    assert sorted(indexed, key=lambda m: (m[1], m[0], m[2])) == sorted(
+        ((t, log, seq, data) for t, log, _, seq, data in expected),
+        key=lambda m: (m[1], m[0], m[2]),
+    )
 
 
 def test_column_encoder_rows_are_the_per_message_bytes():
@@ -239,7 +297,7 @@ import sys
 from pulsejet_sim.scene import load_scene
 from pulsejet_sim.studies import runner
 
-runner._RunColumns.FLUSH_PUBLICATIONS = 10**9  # nothing reaches the writer before close
+runner._RunColumns.PUBLICATIONS_PER_CHUNK = 10**5  # none reach the writer before close
 count = 0
 iterate = runner.Drive.__iter__
 
@@ -286,3 +344,87 @@ def test_ctrl_c_mid_run_writes_every_publication_collected(tmp_path):
     (state_count,) = states
     assert state_count >= count >= 200  # the initial state and every publication yielded
     assert info.counts['/pulsejet/cmd/cable_force'] in (state_count - 1, state_count)
+
+
+@pytest.mark.parametrize('compression, fast', [('zstd', True), ('lz4', True), ('none', True),
+                                               ('zstd', False)])
+def test_publication_layout_writes_the_per_message_encoders_bytes(
+    tmp_path, monkeypatch, compression, fast
+):
+    """
+    bag.publications + write_chunk: every kind of publication, read back by rosbags and mcap.
+
+    Publications without commands (the initial state), with the applied command (the first and
+    on a change), with a ledger, over two chunks; each message the bytes TopicEncoder writes.
+    """
+    from pulsejet_sim.bag.publications import PublicationLayout, STATE_FIELDS, STATE_ORDER
+    from pulsejet_sim.core.model_io import Command, Observation
+    from pulsejet_sim.core.topics import (
+        APPLIED_COMMAND_NAMES, COMMAND_TOPICS, TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER,
+        TOPIC_MANTLE_PROFILE,
+    )
+
+    if not fast:
+        monkeypatch.setattr(bag_writer._FastChunk, 'attach', classmethod(lambda c, w, s: None))
+    rng = np.random.default_rng(3)
+    n, points = 12, 5
+    times = np.arange(n) * 0.01 + 0.01
+    commands = np.abs(rng.normal(size=(n, 3)))
+    commands[4] = commands[3]  # held: no applied command at row 4
+    commands[:, 1] = 1.0
+    states = rng.normal(size=(n, len(STATE_FIELDS)))
+    r_m, z_m = rng.normal(size=(n, points)), rng.normal(size=(n, points))
+    command_ns = cdr.stamps_ns(times - 0.01)
+    command_ns[0] = -1  # the initial state: no commands
+    state_ns = cdr.stamps_ns(times)
+    encoder = cdr.TopicEncoder()
+    ledgers = {row: encoder.ledger({'stored_elastic': float(row), 'closure_relative': 0.0},
+                                   int(state_ns[row])) for row in (0, 5, 11)}
+    applied = np.ones(n, dtype=bool)
+    applied[4] = False
+    out = tmp_path / 'layout.mcap'
+    with bag_writer.BagWriter(out, compression=compression) as bag:
+        topics = [*STATE_ORDER, TOPIC_MANTLE_PROFILE, TOPIC_ENERGY_LEDGER, *COMMAND_TOPICS,
+                  TOPIC_APPLIED_COMMAND]
+        layout = PublicationLayout(bag.channel_ids(topics), points, encoder)
+        for part in (slice(0, 7), slice(7, n)):
+            rows = range(n)[part]
+            stretch = layout.records(
+                command_ns[part], commands[part], applied[part], state_ns[part], states[part],
+                (r_m[part], z_m[part]),
+                {row - rows.start: data for row, data in ledgers.items() if row in rows},
+            )
+            layout.counts = stretch.counts
+            bag.write_chunk(stretch)
+    expected = []
+    for i in range(n):
+        if command_ns[i] >= 0:
+            cmd = Command(*map(float, commands[i]))
+            ns = int(command_ns[i])
+            expected += [(t, ns, data) for t, data in encoder.commands(cmd)]
+            if applied[i]:
+                expected.append((TOPIC_APPLIED_COMMAND, ns, encoder.applied_command(cmd, ns)))
+        obs = Observation(**{**dict.fromkeys(Observation.__dataclass_fields__, 0.0),
+                             **dict(zip(STATE_FIELDS, map(float, states[i]))),
+                             'time_s': float(times[i])})
+        ns = int(state_ns[i])
+        expected += [(t, ns, data) for t, data in encoder.observation(obs, ns)]
+        expected.append((TOPIC_MANTLE_PROFILE, ns, encoder.profile(r_m[i], z_m[i], ns)))
+        if i in ledgers:
+            expected.append((TOPIC_ENERGY_LEDGER, ns, ledgers[i]))
+    got = mcap_messages(out)
+    assert [(t, log, data) for t, log, _, _, data in got] == [
+        ('/' + t if not t.startswith('/') else t, ns, data) for t, ns, data in expected]
+    sequences: dict[str, int] = {}
+    for topic, log, publish, sequence, _ in got:
+        sequences[topic] = sequences.get(topic, 0) + 1
+        assert sequence == sequences[topic] and publish == log
+    summary = mcap_summary(out)
+    assert summary.statistics.chunk_count == 2
+    with AnyReader([out], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        decoded = [(c.topic, reader.deserialize(raw, c.msgtype)) for c, _, raw in
+                   reader.messages()]
+    assert len(decoded) == len(expected)
+    positions = [list(m.position) for t, m in decoded if t == '/pulsejet/applied_command']
+    assert positions == [list(commands[i]) for i in range(n) if command_ns[i] >= 0 and applied[i]]
+    assert APPLIED_COMMAND_NAMES == ('pump_flow_m3_s', 'valve_opening', 'cable_force_n')

@@ -2,23 +2,34 @@
 Benchmark (not a test): what recording costs an offline run.
 
 For the default shell scene (shell_robot) and the lumped default (pump_cycle), timed side by side
-in one process, repeats interleaved:
+in one process, repeats interleaved, each recording to a new file (the previous one deleted
+outside the timing, as `pulsejet run` writes a new file), the garbage collected before each
+timed run:
 
 - physics: runner.run_scene without an output (Simulation.step per publication period, the
   observation after each; no recording);
-- record: runner.run_scene with an MCAP output (what `pulsejet run` times: physics, the run's
-  messages collected as columns, encoded a stretch at a time by bag.cdr.ColumnEncoder and
-  written by BagWriter.write_batch, the file closed);
-- per publication: the same file written with one BagWriter.write_records call per publication
-  (the runner before columns; test_recording checks the two files are identical);
+- record: runner.run_scene with an MCAP output (what `pulsejet run` times: physics, each
+  publication's command, state and profile sample in rows of preallocated arrays, the state
+  every LEDGER_PERIOD_S for its energy ledger (booked at each flush), a chunk of publications
+  laid out with numpy by bag.publications and
+  written by BagWriter.write_chunk, compressed in the writer's worker thread, the file closed);
+  its main-thread CPU time (time.thread_time) against the physics' is given too: the ratio a
+  machine with a free core for the compression would see, whatever the load;
+- per publication: the same messages written with one BagWriter.write_records call per
+  publication (the runner before columns; test_recording checks the runner records the same
+  messages);
 - rclpy record (only when rclpy imports): the same topics written the way the runner did before,
   an rclpy message per sample (ros/messages.py) serialised by rclpy, for comparison;
+- without writing: run_scene with the collected rows dropped at every flush (the collection per
+  publication with the model's profile sample and, for the ledger, a copy of the state; the file
+  opened and closed; no ledger booked, no layout, compression or chunk): the bound on the ratio
+  however fast the ledger, the layout and the writing get;
 - summary: analysis.summarize of the recording (the read-back `pulsejet run` prints after the run;
   not part of the ratio).
 
 Prints a markdown table and writes benchmarks/results/recording.md (date, machine, command,
-medians, the ratio physics/record of the medians). With --profile it adds the cProfile of one
-recorded run per scene (the functions with the most own time).
+medians, the ratio physics/record of the medians; the earlier runs kept below it). With --profile
+it adds the cProfile of one recorded run per scene (the functions with the most own time).
 
     .venv/bin/python -m benchmarks.performance.bench_recording [--repeats 7] [--duration 10]
         [--profile]
@@ -28,7 +39,9 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import gc
 import io
+import itertools
 import os
 from pathlib import Path
 import pstats
@@ -42,41 +55,46 @@ import time
 from benchmarks import common as bench_common
 from pulsejet_sim import analysis
 from pulsejet_sim.scene import load_scene
+from pulsejet_sim.studies import runner
 from pulsejet_sim.studies.runner import Drive, LEDGER_PERIOD_S, run_scene
 
 SCENES = ('shell_robot', 'pump_cycle')
 TARGET_RATIO = 0.7  # issue: `pulsejet run` at >= 0.7x the speed of the physics with observations
 
 
-def physics(name: str, duration_s: float) -> float:
+def physics(name: str, duration_s: float) -> tuple[float, float]:
+    """Return (wall s, this thread's CPU s) of run_scene without an output."""
     scene = load_scene(name)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.thread_time()
     run_scene(scene, duration_s)
-    return time.perf_counter() - start
+    return time.perf_counter() - start, time.thread_time() - cpu
 
 
-def record(name: str, duration_s: float, out: Path) -> float:
+def record(name: str, duration_s: float, out: Path) -> tuple[float, float]:
+    """Return (wall s, this thread's CPU s) of run_scene recording to out."""
     scene = load_scene(name)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.thread_time()
     run_scene(scene, duration_s, out)
-    return time.perf_counter() - start
+    return time.perf_counter() - start, time.thread_time() - cpu
 
 
-def record_without_appending(name: str, duration_s: float, out: Path) -> float:
+def record_without_writing(name: str, duration_s: float, out: Path) -> float:
     """
-    Time run_scene with BagWriter.write_batch a no-op: everything but laying out the messages.
+    Time run_scene with the collected rows dropped at each flush: everything but the writing.
 
-    The collection per publication (the model's profile and ledger), opening and closing the
-    file: what bounds the ratio however fast the encoding and the MCAP appends get.
+    The collection per publication (the model's profile sample and ledger), opening and closing
+    the file: what bounds the ratio however fast the layout and the MCAP chunks get.
     """
-    from pulsejet_sim.bag.writer import BagWriter
+    original = runner._RunColumns.flush
 
-    original = BagWriter.write_batch
-    BagWriter.write_batch = lambda self, batch: None
+    def drop(columns):
+        columns.n, columns.ledgers = 0, {}
+
+    runner._RunColumns.flush = drop
     try:
-        return record(name, duration_s, out)
+        return record(name, duration_s, out)[0]
     finally:
-        BagWriter.write_batch = original
+        runner._RunColumns.flush = original
 
 
 def write_per_publication(path: Path, name: str, duration_s: float) -> None:
@@ -206,25 +224,47 @@ def main(argv=None) -> int:
     load_before = os.getloadavg()
     rows, profiles = [], []
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / 'run.mcap'
+        files = itertools.count()
+
+        def fresh() -> Path:
+            """
+            Return a new file to record to, the previous ones deleted (not timed).
+
+            The garbage of the run before is collected too: the rclpy record leaves enough that
+            a collection would otherwise land in whichever run comes next (the physics one).
+            """
+            for old in Path(tmp).glob('*.mcap'):
+                old.unlink()
+            gc.collect()
+            return Path(tmp) / f'run{next(files)}.mcap'
+
         for name in SCENES:
-            record(name, 0.2, out)  # compile / load the numba cache, import everything
+            record(name, 0.2, fresh())  # compile / load the numba cache, import everything
             if with_rclpy:
-                record_with_rclpy(name, 0.2, out)
-            times: dict[str, list[float]] = {'physics': [], 'record': [], 'rclpy': [],
-                                             'summary': [], 'no_append': [], 'per_pub': []}
+                record_with_rclpy(name, 0.2, fresh())
+            times: dict[str, list[float]] = {
+                'physics': [], 'record': [], 'physics_cpu': [], 'record_cpu': [], 'rclpy': [],
+                'summary': [], 'no_writing': [], 'per_pub': [],
+            }
             for _ in range(args.repeats):  # interleaved: the machine's load hits all alike
-                times['physics'].append(physics(name, args.duration))
-                times['record'].append(record(name, args.duration, out))
+                gc.collect()
+                wall, cpu = physics(name, args.duration)
+                times['physics'].append(wall)
+                times['physics_cpu'].append(cpu)
+                out = fresh()
+                wall, cpu = record(name, args.duration, out)
+                times['record'].append(wall)
+                times['record_cpu'].append(cpu)
+                size = out.stat().st_size
                 times['summary'].append(summary(out))
-                times['no_append'].append(record_without_appending(name, args.duration, out))
-                times['per_pub'].append(record_per_publication(name, args.duration, out))
+                times['no_writing'].append(record_without_writing(name, args.duration, fresh()))
+                times['per_pub'].append(record_per_publication(name, args.duration, fresh()))
                 if with_rclpy:
-                    times['rclpy'].append(record_with_rclpy(name, args.duration, out))
+                    times['rclpy'].append(record_with_rclpy(name, args.duration, fresh()))
             med = {k: statistics.median(v) for k, v in times.items() if v}
-            rows.append((name, med, out.stat().st_size))
+            rows.append((name, med, size))
             if args.profile:
-                profiles.append(profile_text(name, args.duration, out))
+                profiles.append(profile_text(name, args.duration, fresh()))
     text = bench_common.header(
         'Offline recording: `pulsejet run` against the same physics without recording',
         'python -m benchmarks.performance.bench_recording '
@@ -240,41 +280,77 @@ def main(argv=None) -> int:
     )
     text += (
         f'{args.duration:g} s simulated per run, median of {args.repeats} interleaved repeats '
-        '(wall s, real-time factor in brackets). physics: runner.run_scene without an output '
-        '(observation per publication, no recording); record: runner.run_scene to MCAP (the '
-        "run's messages as columns, encoded a stretch at a time, zstd chunks); per "
-        'publication: the same file with one write_records call per publication (the runner '
-        'before columns); rclpy record: the same topics built as rclpy messages and '
-        'serialised by rclpy (the runner before bag.cdr); without writing: run_scene with '
-        "write_batch a no-op (the collection per publication with the model's profile and "
-        'ledger, file open and close: the bound on the ratio however fast the encoding and the '
-        'MCAP appends get); summary: analysis.summarize reading the file back (printed by '
-        '`pulsejet run` after the timed run, not in the ratio). Ratio = physics / '
-        f'record (target >= {TARGET_RATIO}).\n\n'
-        '| scene | physics | record | ratio | per publication | ratio | rclpy record | ratio '
-        '| without writing | ratio | summary | MCAP size |\n'
-        '|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+        '(wall s, real-time factor in brackets), each recording to a new file, the garbage '
+        'collected before each timed run. physics: '
+        'runner.run_scene without an output (observation per publication, no recording); '
+        'record: runner.run_scene to MCAP (rows per publication; at each flush the ledgers '
+        'booked and a 768 KiB chunk laid out with numpy by bag.publications, zstd level -3 in '
+        "the writer's worker thread); CPU: "
+        "the same two runs' main-thread CPU time (time.thread_time), physics / record: the "
+        'ratio with a core free for the compression, whatever the load; per publication: the '
+        'same messages with one write_records call per publication (the runner before '
+        'columns); rclpy record: the same topics built as rclpy messages and serialised by '
+        'rclpy (the runner before bag.cdr); without writing: run_scene with the collected rows '
+        "dropped at each flush (the collection per publication with the model's profile sample "
+        'and a copy of the state for the ledger, file open and close: the bound on the ratio '
+        'however fast the ledger, the layout and the chunks get); summary: analysis.summarize '
+        'reading the file back (printed by `pulsejet run` after the timed run, not in the '
+        'ratio). Ratio = physics / record '
+        f'(target >= {TARGET_RATIO}).\n\n'
+        '| scene | physics | record | ratio | CPU ratio | per publication | ratio | rclpy record '
+        '| ratio | without writing | ratio | summary | MCAP size |\n'
+        '|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
     )
 
     def cell(seconds):
         return f'{seconds:.3f} s ({args.duration / seconds:.0f}x)'
 
+    verdicts = []
     for name, med, size in rows:
         rclpy_cells = (
             f'{cell(med["rclpy"])} | {med["physics"] / med["rclpy"]:.2f}'
             if 'rclpy' in med else 'n/a | n/a'
         )
+        ratio = med['physics'] / med['record']
+        cpu_ratio = med['physics_cpu'] / med['record_cpu']
         text += (
-            f'| {name} | {cell(med["physics"])} | {cell(med["record"])} | '
-            f'{med["physics"] / med["record"]:.2f} | {cell(med["per_pub"])} | '
-            f'{med["physics"] / med["per_pub"]:.2f} | {rclpy_cells} | {cell(med["no_append"])} | '
-            f'{med["physics"] / med["no_append"]:.2f} | {med["summary"]:.3f} s | '
-            f'{size / 1e6:.2f} MB |\n'
+            f'| {name} | {cell(med["physics"])} | {cell(med["record"])} | {ratio:.2f} | '
+            f'{cpu_ratio:.2f} | {cell(med["per_pub"])} | '
+            f'{med["physics"] / med["per_pub"]:.2f} | {rclpy_cells} | '
+            f'{cell(med["no_writing"])} | {med["physics"] / med["no_writing"]:.2f} | '
+            f'{med["summary"]:.3f} s | {size / 1e6:.2f} MB |\n'
         )
+        verdicts.append(
+            f'{name} {ratio:.2f} ('
+            + ('meets' if ratio >= TARGET_RATIO else 'below')
+            + f' the target; CPU ratio {cpu_ratio:.2f})'
+        )
+    text += f'\nVerdict against {TARGET_RATIO} (wall ratio of this run): ' + '; '.join(verdicts)
+    text += '.\n'
     if profiles:
         text += '\n' + '\n'.join(profiles)
-    bench_common.write('recording', text)
+    bench_common.write('recording', with_history(text))
     return 0
+
+
+def with_history(text: str) -> str:
+    """
+    Return this run's text followed by the earlier runs stored in recording.md, newest first.
+
+    The stored file's latest run (its text between the title and '## Earlier runs') becomes the
+    first earlier run, under a heading of its date line.
+    """
+    path = bench_common.RESULTS / 'recording.md'
+    if not path.exists():
+        return text
+    stored = path.read_text()
+    body = stored.split('\n', 1)[1].lstrip('\n') if stored.startswith('# ') else stored
+    latest, _, earlier = body.partition('## Earlier runs (newest first)\n')
+    first_line, _, rest = latest.strip().partition('\n')
+    return (
+        text.rstrip('\n') + '\n\n## Earlier runs (newest first)\n\n'
+        + f'### {first_line}\n{rest}\n\n' + earlier.lstrip('\n')
+    ).rstrip('\n') + '\n'
 
 
 if __name__ == '__main__':

@@ -56,6 +56,7 @@ LEVEL_OK, LEVEL_WARN, LEVEL_ERROR = 0, 1, 2
 _MAX_STAMP_S = 2.0**31
 _UINT32 = struct.Struct('<I')
 _PADS = (b'', b'\x00', b'\x00\x00', b'\x00\x00\x00')
+_STAMP = struct.Struct('<iI')  # builtin_interfaces/Time: int32 s, uint32 ns
 
 
 def stamp_ns(time_s: float) -> int:
@@ -74,6 +75,10 @@ def _string(text: str) -> bytes:
     """CDR string body: uint32 length with the NUL, the UTF-8 bytes, the NUL (4-aligned start)."""
     data = text.encode('utf-8') + b'\x00'
     return struct.pack('<I', len(data)) + data
+
+
+_LEDGER_NAME = _string(LEDGER_STATUS_NAME)
+_LEDGER_HARDWARE_ID = _string(LEDGER_HARDWARE_ID)
 
 
 class _Layout:
@@ -190,6 +195,8 @@ class TopicEncoder:
         self._odometry_zeros = (0.0,) * 36
         self._clock = struct.Struct('<iI')
         self._types = dict(TOPIC_TYPES)
+        self._ledger_head: bytes | None = None  # the ledger up to its status' level, stamp 0
+        self._ledger_keys: dict[str, bytes] = {}  # a ledger key as a CDR string
 
     def type_of(self, topic: str) -> str:
         """Return the ROS type name of a pulsejet topic (interface.TOPIC_TYPES)."""
@@ -283,24 +290,42 @@ class TopicEncoder:
     def ledger(self, ledger: Mapping[str, float], ns: int) -> bytes:
         """Return the energy ledger as a diagnostic_msgs/DiagnosticArray (ledger_message)."""
         level, message = ledger_status(ledger)
-        w = _Writer()
-        w.header(ns, self.frame_id)
-        w.pack('I', 4, 1)  # one DiagnosticStatus
-        w.pack('B', 1, level)
-        w.string(LEDGER_STATUS_NAME)
-        w.string(message)
-        w.string(LEDGER_HARDWARE_ID)
-        w.pack('I', 4, len(ledger))
+        head = self._ledger_head
+        if head is None:
+            w = _Writer()
+            w.header(0, self.frame_id)
+            w.pack('I', 4, 1)  # one DiagnosticStatus
+            head = self._ledger_head = bytes(w.buf)
+        buf = bytearray(head)
+        _STAMP.pack_into(buf, 4, ns // 1_000_000_000, ns % 1_000_000_000)
+        buf.append(level)
+        # every string 4-aligned from the body start, 4 bytes in: len(buf) % 4 is that offset
+        buf += _PADS[-len(buf) % 4]
+        buf += _LEDGER_NAME
+        data = message.encode('utf-8')
+        buf += _PADS[-len(buf) % 4]
+        buf += _UINT32.pack(len(data) + 1)
+        buf += data
+        buf += b'\x00'
+        buf += _PADS[-len(buf) % 4]
+        buf += _LEDGER_HARDWARE_ID
+        buf += _PADS[-len(buf) % 4]
+        buf += _UINT32.pack(len(ledger))
         # the KeyValue strings inline (the ledger is the only long message built per sample)
-        buf, pack = w.buf, _UINT32.pack
+        keys, pack = self._ledger_keys, _UINT32.pack
         for key, value in ledger.items():
-            for text in (str(key), repr(float(value))):
-                data = text.encode('utf-8')
-                buf += _PADS[-len(buf) % 4]  # 4-aligned from the body start (4 bytes in)
-                buf += pack(len(data) + 1)
-                buf += data
-                buf += b'\x00'
-        return w.value()
+            text = keys.get(key)
+            if text is None:
+                data = str(key).encode('utf-8')
+                text = keys[key] = pack(len(data) + 1) + data + b'\x00'
+            buf += _PADS[-len(buf) % 4]
+            buf += text
+            data = repr(float(value)).encode()
+            buf += _PADS[-len(buf) % 4]
+            buf += pack(len(data) + 1)
+            buf += data
+            buf += b'\x00'
+        return bytes(buf)
 
 
 class ColumnEncoder:

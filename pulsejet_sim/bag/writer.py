@@ -31,6 +31,7 @@ from __future__ import annotations
 import atexit
 import datetime
 import io
+import json
 import math
 import os
 from pathlib import Path
@@ -39,17 +40,21 @@ import struct
 import threading
 import time
 from types import FrameType
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence, TYPE_CHECKING
 import weakref
+import zlib
 
-from mcap.records import MessageIndex
+from mcap.records import ChunkIndex, MessageIndex
 from mcap.writer import CompressionType, Writer
 import numpy as np
 from pulsejet_sim.bag import msgdefs
 from pulsejet_sim.bag.batch import Merged, RecordBatch
 from pulsejet_sim.bag.records import FORMAT_VERSION
-from pulsejet_sim.core.schema import dump_yaml, load_own_yaml
+from pulsejet_sim.core.schema import load_own_yaml
 import yaml
+
+if TYPE_CHECKING:
+    from pulsejet_sim.bag.publications import Stretch
 
 LIBRARY = f'pulsejet_sim.bag pulsejet-format={FORMAT_VERSION} (rosbag2_storage_mcap layout)'
 COMPRESSIONS = {
@@ -99,7 +104,11 @@ class BagWriter:
             bag.write('pulsejet/velocity', serialize_message(msg), log_time_ns)
 
     Thread-safe: writes from several executor threads and a close() from another thread are
-    serialized.
+    serialized. close() syncs the file to the disk (os.fsync) unless sync_on_close=False: every
+    write is with the OS by then either way, so only a power loss or an OS crash tells them apart.
+    zstd_level: the level of write_chunk's zstd chunks (default 1, rosbag2's: mcap's C++ writer,
+    CompressionLevel::Default; -3 is its Fast); messages written one by one go through mcap's
+    writer (level 3).
     """
 
     def __init__(
@@ -109,6 +118,8 @@ class BagWriter:
         compression: str = 'zstd',
         chunk_size_bytes: int = 256 * 1024,
         flush_period_s: float = 1.0,
+        sync_on_close: bool = True,
+        zstd_level: int = 1,
     ) -> None:
         if compression not in COMPRESSIONS:
             raise BagError(
@@ -129,6 +140,14 @@ class BagWriter:
             )
         self.path = Path(path)
         self.compression = compression
+        self.chunk_size_bytes = chunk_size_bytes
+        self.sync_on_close = bool(sync_on_close)
+        if not (isinstance(zstd_level, int) and not isinstance(zstd_level, bool)
+                and -100 <= zstd_level <= 22):
+            raise BagError(
+                f'zstd_level={zstd_level!r} rejected; allowed: an integer in [-100, 22]'
+            )
+        self.zstd_level = zstd_level
         self.flush_period_s = float(flush_period_s)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, 'wb')
@@ -148,6 +167,7 @@ class BagWriter:
         self._last_flush = time.monotonic()
         self._pending_since: float | None = None  # monotonic time of the oldest unflushed message
         self._fast = _FastChunk.attach(self._writer, chunk_size_bytes)
+        self._pending_chunk = None  # write_chunk's chunk being compressed, written next call
         self._closed = False
         self._busy_thread: int | None = None  # thread id inside write(), for signal deferral
         self._pending_signal: int | None = None
@@ -157,8 +177,13 @@ class BagWriter:
         # alive.
         self._atexit = _weak_close(self)
         atexit.register(self._atexit)
-        # An idle writer (no write() to trigger the flush) still flushes within flush_period_s.
+        # An idle writer (no write() to trigger the flush) still flushes within flush_period_s:
+        # a thread started with the first message left in an open chunk (write_chunk leaves
+        # none, so a writer fed only chunks starts none)
         self._stop_flusher = threading.Event()
+        self._flusher: threading.Thread | None = None
+
+    def _start_flusher(self) -> None:
         self._flusher = threading.Thread(
             target=_flush_loop,
             args=(weakref.ref(self), self._stop_flusher, self._tick_s()),
@@ -296,6 +321,8 @@ class BagWriter:
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
+                if self._flusher is None:
+                    self._start_flusher()
             if self._flush_due(now):
                 self._flush_locked()
 
@@ -330,6 +357,8 @@ class BagWriter:
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
+                if self._flusher is None:
+                    self._start_flusher()
             if self._flush_due(now):
                 self._flush_locked()
 
@@ -391,8 +420,78 @@ class BagWriter:
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
+                if self._flusher is None:
+                    self._start_flusher()
             if self._flush_due(now):
                 self._flush_locked()
+
+    def channel_ids(self, topics: Sequence[str]) -> dict[str, int]:
+        """
+        Add the pulsejet topics (interface.TOPIC_TYPES types) in this order; return their channels.
+
+        For a producer that lays out its own records (write_chunk): topic -> channel id.
+        """
+        return {topic: self._route_of(topic)[0] for topic in topics}
+
+    def write_chunk(self, stretch: 'Stretch') -> None:
+        """
+        Write a stretch of Message records (bag.publications.Stretch) as one MCAP chunk.
+
+        The records must be on channels added here (channel_ids), with sequences continuing each
+        channel's count and log times not before what was written. The chunk is compressed as
+        the writer's other chunks, followed by its message indexes and counted in the summary
+        (statistics, chunk index), as mcap's writer does for the same records; schema and
+        channel records added since the last chunk open it. The compression (zstd and zlib's
+        CRC release the GIL) runs in a worker thread while the caller goes on; the chunk goes to
+        the file at the next call into the writer (the next write_chunk, a flush, close), so a
+        producer handing over a chunk every flush_period_s / 2 keeps the flush guarantee. With
+        an mcap library that does not look as expected, the records go through mcap's
+        add_message one by one (the same messages in different chunks).
+        """
+        if not stretch.size:
+            return
+        counts = {channel: len(table) for channel, table in stretch.index}
+        names = {route[0]: route[1] for route in self._route.values()}
+        unknown = sorted(set(counts) - set(names))
+        if unknown:
+            raise BagError(
+                f'channel ids {unknown} were not added with channel_ids; allowed: {sorted(names)}'
+            )
+        if stretch.first_ns < 0:
+            raise BagError(
+                f'log_time_ns={stretch.first_ns!r} rejected; allowed: an integer >= 0 (ns)'
+            )
+        with self._mutating():  # writes the chunk handed over before, if any
+            if self._fast is not None:
+                # compressed by a worker thread while the caller runs on; written by the next
+                # call into the writer (or close), in order
+                self._pending_chunk = self._fast.write_chunk(
+                    stretch, self.compression, self.zstd_level
+                )
+            else:
+                data = b''.join(stretch.records)
+                offset = 0
+                while offset < len(data):
+                    _, length, channel, sequence, log_ns, publish_ns = _MESSAGE_HEAD.unpack_from(
+                        data, offset
+                    )
+                    body = data[offset + _MESSAGE_HEAD.size:offset + 9 + length]
+                    self._writer.add_message(channel, log_ns, body, publish_ns, sequence)
+                    offset += 9 + length
+            for channel, count in counts.items():
+                self._counts[names[channel]] += count
+            first, last = stretch.first_ns, stretch.last_ns
+            self._first_ns = first if self._first_ns is None else min(self._first_ns, first)
+            self._last_ns = last if self._last_ns is None else max(self._last_ns, last)
+            if self._fast is None:
+                self._flush_locked()  # the chunk is closed: hand it to the OS now
+
+    def _write_pending_chunk(self) -> None:
+        """Write the chunk write_chunk handed over (waiting for its compression); lock held."""
+        pending, self._pending_chunk = self._pending_chunk, None
+        if pending is not None:
+            self._fast.finish_chunk_record(pending)
+            self._writer.flush()  # to the OS
 
     def _route_of(self, topic: str) -> tuple[int, str]:
         """(channel id, qualified name) of a topic as write_records gets it; adds the topic."""
@@ -457,6 +556,7 @@ class BagWriter:
                     self._flush_locked()
 
     def _flush_locked(self) -> None:
+        self._write_pending_chunk()
         self._writer.flush()
         self._last_flush = time.monotonic()
         self._pending_since = None
@@ -483,12 +583,14 @@ class BagWriter:
                 hooks, self._close_hooks = self._close_hooks, []
                 for hook in hooks:
                     hook()
+                self._write_pending_chunk()
                 self._writer.add_metadata(
                     'rosbag2', {'serialized_metadata': self._rosbag2_metadata()}
                 )
                 self._writer.finish()
                 self._file.flush()
-                os.fsync(self._file.fileno())
+                if self.sync_on_close:  # on the disk, not only with the OS (a power loss)
+                    os.fsync(self._file.fileno())
             finally:
                 self._closed = True
                 self._stop_flusher.set()
@@ -507,7 +609,9 @@ class BagWriter:
         """
         Return the `rosbag2_bagfile_information` YAML that rosbag2 stores in the file.
 
-        Metadata version 9.
+        Metadata version 9, written in YAML's JSON subset (flow style, which rosbag2's yaml-cpp
+        and PyYAML read as they read block style): json is about 20x faster than PyYAML's
+        representer, a fixed cost of every recording.
         """
         start = self._first_ns or 0
         duration = (self._last_ns - start) if self._last_ns is not None else 0
@@ -556,7 +660,7 @@ class BagWriter:
                 'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
             }
         }
-        return dump_yaml(data)
+        return json.dumps(data)
 
 
 class _Mutating:
@@ -582,6 +686,12 @@ class _Mutating:
             raise
         self.outer = bag._busy_thread is not None
         bag._busy_thread = threading.get_ident()
+        if bag._pending_chunk is not None:  # whatever comes next goes after it in the file
+            try:
+                bag._write_pending_chunk()
+            except BaseException:
+                self.__exit__()
+                raise
 
     def __exit__(self, *exc: object) -> None:
         bag = self.bag
@@ -616,7 +726,8 @@ class _FastChunk:
     takes the fast one).
     """
 
-    __slots__ = ('writer', 'builder', 'stats', 'finalize', 'chunk_size')
+    __slots__ = ('writer', 'builder', 'stats', 'finalize', 'chunk_size', 'finish_chunk', 'flush',
+                 'stream', 'chunk_indexes', 'compressor')
 
     @classmethod
     def attach(cls, writer: Writer, chunk_size: int) -> '_FastChunk | None':
@@ -624,6 +735,7 @@ class _FastChunk:
         from mcap.data_stream import RecordBuilder
         from mcap.opcode import Opcode
         from mcap.records import Statistics
+        from mcap.writer import IndexType
 
         fast = cls()
         fast.writer = writer
@@ -631,12 +743,23 @@ class _FastChunk:
         fast.stats = getattr(writer, '_Writer__statistics', None)
         fast.finalize = getattr(writer, '_Writer__maybe_finalize_chunk', None)
         fast.chunk_size = chunk_size
+        fast.finish_chunk = getattr(writer, '_Writer__finalize_chunk', None)
+        fast.flush = getattr(writer, '_Writer__flush', None)
+        fast.stream = getattr(writer, '_Writer__stream', None)
+        fast.chunk_indexes = getattr(writer, '_Writer__chunk_indices', None)
+        fast.compressor = None
         expected = (
             type(fast.builder) is ChunkBuilder
             and type(getattr(fast.builder, 'record_writer', None)) is RecordBuilder
             and isinstance(getattr(fast.builder.record_writer, '_buffer', None), io.BytesIO)
             and isinstance(fast.stats, Statistics)
             and callable(fast.finalize)
+            and callable(fast.finish_chunk)
+            and callable(fast.flush)
+            and hasattr(fast.stream, 'tell')
+            and isinstance(fast.chunk_indexes, list)
+            and getattr(writer, '_Writer__enable_crcs', None) is True
+            and getattr(writer, '_Writer__index_types', None) == IndexType.ALL
             and getattr(writer, '_Writer__chunk_size', None) == chunk_size
             and int(Opcode.MESSAGE) == 5
             and int(Opcode.MESSAGE_INDEX) == 7
@@ -758,6 +881,162 @@ class _FastChunk:
             i += m
             if ends[m - 1] > chunk_size:
                 self.finalize()
+
+    def write_chunk(self, stretch: 'Stretch', compression: str, level: int) -> tuple:
+        """
+        Start the chunk of a stretch: its data handed to the compression worker.
+
+        What mcap.writer.Writer's __finalize_chunk writes for a chunk holding these records
+        (finish_chunk_record writes it): a message still open in mcap's chunk is written in a
+        chunk of its own first; schema and channel records waiting there open this one.
+        Returns what finish_chunk_record needs.
+        """
+        builder = self.builder
+        if builder.num_messages:
+            self.finish_chunk()
+        prefix = builder.record_writer.end()  # schema and channel records added since
+        builder.reset()
+        pieces = [prefix, *stretch.records] if prefix else stretch.records
+        size = len(prefix) + stretch.size
+        if compression == 'zstd' and self.compressor is None:
+            import zstandard
+
+            self.compressor = zstandard.ZstdCompressor(level=level)
+        data = b''.join(pieces)  # here: the worker holding the GIL for the copy could stall us
+        job = _Job(lambda: _compress(data, compression, self.compressor))
+        if _ChunkCompressor.in_thread:
+            _ChunkCompressor.shared().submit(job)
+        return job, stretch, len(prefix), size
+
+    def finish_chunk_record(self, started: tuple) -> None:
+        """Write a chunk write_chunk started: Chunk record, MessageIndex records, ChunkIndex."""
+        job, stretch, shift, size = started
+        crc, compression, packed = job.result()
+        stats = self.stats
+        tag = compression.encode()
+        head = struct.pack(
+            '<BQQQQII', 6, 8 + 8 + 8 + 4 + 4 + len(tag) + 8 + len(packed),
+            stretch.first_ns, stretch.last_ns, size, crc, len(tag),
+        ) + tag + struct.pack('<Q', len(packed))
+        self.flush()  # whatever mcap holds outside a chunk goes first
+        stream = self.stream
+        chunk_start = stream.tell()
+        stream.write(head)
+        stream.write(packed)
+        chunk_length = len(head) + len(packed)
+        index_start = chunk_start + chunk_length
+        offsets, parts, at = {}, [], index_start
+        for channel, table in stretch.index:
+            if shift:
+                table = table + np.array([0, shift], dtype='<u8')
+            body = table.astype('<u8', copy=False).tobytes()
+            parts.append(struct.pack('<BQHI', 7, 6 + len(body), channel, len(body)))
+            parts.append(body)
+            offsets[channel] = at
+            at += 15 + len(body)
+        stream.write(b''.join(parts))
+        self.chunk_indexes.append(ChunkIndex(
+            message_start_time=stretch.first_ns,
+            message_end_time=stretch.last_ns,
+            chunk_start_offset=chunk_start,
+            chunk_length=chunk_length,
+            message_index_offsets=offsets,
+            message_index_length=at - index_start,
+            compression=compression,
+            compressed_size=len(packed),
+            uncompressed_size=size,
+        ))
+        count = sum(len(table) for _, table in stretch.index)
+        _extend_statistics(stats, stretch.first_ns, stretch.last_ns, count)
+        for channel, table in stretch.index:
+            stats.channel_message_counts[channel] += len(table)
+        stats.chunk_count += 1
+
+
+def _compress(data: bytes, compression: str, compressor) -> tuple[int, str, bytes]:
+    """
+    Return (CRC-32, compression name, compressed bytes) of the data of an MCAP chunk.
+
+    Two calls that release the GIL (zlib's CRC-32, the compression): in the worker, the GIL is
+    held only for a few bytecodes around them, so a worker descheduled on a busy machine hardly
+    ever holds up the producer.
+    """
+    crc = zlib.crc32(data)
+    if compression == 'zstd':
+        return crc, compression, compressor.compress(data)
+    if compression == 'lz4':
+        import lz4.frame
+
+        return crc, compression, lz4.frame.compress(data)
+    return crc, '', data
+
+
+class _Job:
+    """
+    A call for _ChunkCompressor: run by whichever comes first, the worker or result().
+
+    result() returns or raises the call's outcome; if the worker has not started the call yet
+    (a busy machine can leave a woken thread waiting for a core), the caller runs it itself
+    instead of waiting for the worker to be scheduled.
+    """
+
+    __slots__ = ('call', 'claim', 'done', 'value', 'error')
+
+    def __init__(self, call: Callable[[], Any]) -> None:
+        self.call, self.claim, self.done = call, threading.Lock(), threading.Event()
+        self.value = self.error = None
+
+    def run(self) -> None:
+        if not self.claim.acquire(blocking=False):
+            return  # taken by result()
+        try:
+            self.value = self.call()
+        except BaseException as err:  # handed to the waiting caller
+            self.error = err
+        finally:
+            self.done.set()
+
+    def result(self) -> Any:
+        self.run()
+        self.done.wait()
+        if self.error is not None:
+            raise self.error
+        return self.value
+
+
+class _ChunkCompressor:
+    """
+    One daemon thread per process that compresses write_chunk's chunks, in order.
+
+    zstd, lz4 and zlib's CRC-32 release the GIL, so a chunk compresses on another core while
+    the producer (the offline runner's physics) goes on. Started with the first chunk, kept for
+    the next writers (one thread start per process); a forked child starts its own.
+    """
+
+    _lock = threading.Lock()
+    _shared: '_ChunkCompressor | None' = None
+    in_thread = True  # False: each chunk compressed by the caller, when it is handed over
+
+    @classmethod
+    def shared(cls) -> '_ChunkCompressor':
+        with cls._lock:
+            if cls._shared is None or not cls._shared.thread.is_alive():
+                cls._shared = cls()
+            return cls._shared
+
+    def __init__(self) -> None:
+        from queue import SimpleQueue
+
+        self.jobs: SimpleQueue = SimpleQueue()
+        self.thread = threading.Thread(target=self._run, name='bag-compress', daemon=True)
+        self.thread.start()
+
+    def submit(self, job: _Job) -> None:
+        self.jobs.put(job)
+
+    def _run(self) -> None:
+        while True:
+            self.jobs.get().run()
 
 
 def _extend_statistics(stats, first_ns: int, last_ns: int, count: int) -> None:

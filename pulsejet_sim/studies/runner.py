@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import math
 import operator
 from pathlib import Path
+import struct
 import threading
 import time
 from typing import Iterator
@@ -23,10 +24,12 @@ from pulsejet_sim.routines import routine_from_scene
 from pulsejet_sim.scene import Scene
 
 LEDGER_PERIOD_S = 0.2  # energy ledger messages at 5 Hz, as sim_node publishes them
-#: the Observation fields the state topics carry (bag.cdr.ColumnEncoder.state's names)
-STATE_FIELDS = (
-    'mantle_radius_m', 'volume_m3', 'velocity_m_s', 'thrust_n', 'fluid_mass_kg', 'position_m'
-)
+#: MCAP chunk size of a recorded run: rosbag2's default (mcap's C++ writer, 768 KiB); fewer
+#: chunks than the writer's default cost less per run (benchmarks/results/recording.md)
+RUN_CHUNK_BYTES = 768 * 1024
+#: zstd level of a recorded run's chunks: mcap's C++ CompressionLevel::Fast (rosbag2's default is
+#: 1): a third less compression CPU for files about 12 % larger (benchmarks/results/recording.md)
+RUN_ZSTD_LEVEL = -3
 
 
 def steps_per_publication(scene: Scene) -> int:
@@ -106,7 +109,11 @@ def _record(drive: Drive, out: Path) -> RunResult:
 
     sim, scene = drive.sim, drive.scene
     ledger_every = max(1, int(round(LEDGER_PERIOD_S / (drive.batch * scene.model.dt_s))))
-    writer = BagWriter(out)
+    # no fsync at close: a killed run's writes are with the OS already, and an offline run
+    # reruns bit for bit from its scene (the sync cost ~5 % of a 10 s shell_robot run)
+    writer = BagWriter(
+        out, chunk_size_bytes=RUN_CHUNK_BYTES, sync_on_close=False, zstd_level=RUN_ZSTD_LEVEL
+    )
     # the scene travels with the recording, so `pulsejet resim FILE` needs nothing else
     writer.add_metadata(
         'pulsejet',
@@ -115,7 +122,7 @@ def _record(drive: Drive, out: Path) -> RunResult:
             'scene_yaml': dump_yaml(dict(scene.data, name=scene.name)),
         },
     )
-    columns = _RunColumns(writer)
+    columns = _RunColumns(writer, sim)
     writer.on_close(columns.flush)
     # Ctrl-C or SIGTERM during a long offline run still leaves a complete, readable file
     restore_signals = (
@@ -125,15 +132,10 @@ def _record(drive: Drive, out: Path) -> RunResult:
     )
     published = 0
     try:
-        columns.state(sim, sim.observe(), ledger=True)
-        for start_s, command, obs in drive:
-            columns.commands(start_s, command)
-            published += 1
-            columns.state(
-                sim, obs, ledger=published % ledger_every == 0 or published == drive.batches
-            )
+        columns.add(None, sim.observe())
+        published = columns.record(drive, ledger_every)
         if drive.fault is not None:
-            columns.state(sim, sim.observe(), ledger=True)
+            columns.add(None, sim.observe())
     finally:
         writer.close()  # hands the last columns over first (on_close)
         if restore_signals is not None:
@@ -143,100 +145,165 @@ def _record(drive: Drive, out: Path) -> RunResult:
 
 class _RunColumns:
     """
-    The run's messages as columns, written a stretch at a time (bag.batch, bag.cdr.ColumnEncoder).
+    The run's publications as columns, written a chunk at a time (bag.publications).
 
-    Per publication only one tuple is appended (one bytecode, so a signal handler that closes the
-    writer mid-run sees whole publications); flush() encodes each topic's messages at once. The
-    order keys put a publication's commands before its state, each group in the order sim_node
-    publishes it, so the file is the one a write_records call per publication writes.
+    Per publication the command, the state values and the model's profile sample go into a row
+    of preallocated arrays (every LEDGER_PERIOD_S a copy of the state too, for its energy
+    ledger); the row counts only once it is complete (one store, so a signal handler that closes
+    the writer mid-run hands over whole publications). flush() books the ledgers, lays out the
+    records of every row with numpy (PublicationLayout.records) and writes them as one MCAP chunk
+    (BagWriter.write_chunk).
     """
 
-    FLUSH_PUBLICATIONS = 250  # about 0.3 MB of messages per flush for the default shell scene
-    # slots within a publication: commands, the applied command, state topics, profile, ledger
-    SLOT_APPLIED, SLOT_STATE, SLOT_PROFILE, SLOT_LEDGER, SLOTS = 3, 4, 11, 12, 16
+    #: rows per chunk; None: as many as fill the writer's chunk size
+    PUBLICATIONS_PER_CHUNK: int | None = None
 
-    def __init__(self, writer) -> None:
-        from pulsejet_sim.bag.cdr import ColumnEncoder
-        from pulsejet_sim.core.topics import APPLIED_COMMAND_NAMES
-
-        self.writer = writer
-        self.encoder = ColumnEncoder()
-        self.command_values = operator.attrgetter(*APPLIED_COMMAND_NAMES)  # the encoder's columns
-        self.state_values = operator.attrgetter(*STATE_FIELDS)
-        self.publication = 0
-        self.last_values: tuple | None = None
-        self.command_rows: list[tuple] = []
-        self.state_rows: list[tuple] = []
-        self.since = time.monotonic()
-
-    def commands(self, start_s: float, command: Command) -> None:
-        """Add the command sent at start_s; the applied command too when it changed."""
-        self.publication += 1
-        values = self.command_values(command)
-        self.command_rows.append((self.publication, start_s, values != self.last_values, values))
-        self.last_values = values
-
-    def state(self, sim: Simulation, obs: Observation, ledger: bool) -> None:
-        """Add the state after a publication's steps (its profile, and the ledger if asked)."""
-        from pulsejet_sim.bag.cdr import stamp_ns
-
-        self.state_rows.append((
-            self.publication, obs.time_s, self.state_values(obs), sim.profile(),
-            self.encoder.encoder.ledger(sim.energy_ledger(), stamp_ns(obs.time_s))
-            if ledger else None,
-        ))
-        if (
-            len(self.state_rows) >= self.FLUSH_PUBLICATIONS
-            or time.monotonic() - self.since >= 0.5 * self.writer.flush_period_s
-        ):
-            self.flush()
-
-    def flush(self) -> None:
-        """Encode what was added, topic by topic, and write it as one batch."""
-        from pulsejet_sim.bag.batch import RecordBatch
-        from pulsejet_sim.bag.cdr import stamps_ns
+    def __init__(self, writer, sim: Simulation) -> None:
+        from pulsejet_sim.bag.cdr import TopicEncoder
+        from pulsejet_sim.bag.publications import PublicationLayout, STATE_FIELDS, STATE_ORDER
         from pulsejet_sim.core.topics import (
-            TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER, TOPIC_MANTLE_PROFILE,
+            APPLIED_COMMAND_NAMES, COMMAND_TOPICS, TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER,
+            TOPIC_MANTLE_PROFILE,
         )
         import numpy as np
 
-        commands, self.command_rows = self.command_rows, []
-        states, self.state_rows = self.state_rows, []
+        self.writer, self.sim = writer, sim
+        model = sim.model
+        profile = sim.profile()
+        sample = getattr(model, 'profile_sample', None)
+        if profile is None:
+            self.sample = self.profiles_of = None
+        elif sample is not None and hasattr(model, 'profiles_of_samples'):
+            self.sample, self.profiles_of = sample, model.profiles_of_samples
+        else:  # a model without the array methods: its profile() each time, r then z
+            points = len(profile[0])
+
+            def sample(state):
+                return np.concatenate(model.profile(state))
+
+            self.sample = sample
+            self.profiles_of = lambda samples: (samples[:, :points], samples[:, points:])
+        # channels in the order a write_records call per publication adds them
+        topics = [*STATE_ORDER, *([TOPIC_MANTLE_PROFILE] if profile is not None else []),
+                  TOPIC_ENERGY_LEDGER, *COMMAND_TOPICS, TOPIC_APPLIED_COMMAND]
+        self.encoder = TopicEncoder()
+        self.layout = PublicationLayout(
+            writer.channel_ids(topics), None if profile is None else len(profile[0]),
+            self.encoder,
+        )
+        per_publication = self.layout.command.width + self.layout.state.width
+        capacity = self.PUBLICATIONS_PER_CHUNK or max(
+            1, writer.chunk_size_bytes // per_publication
+        )
+        self.capacity = capacity
+        self.command_values = operator.attrgetter(*APPLIED_COMMAND_NAMES)
+        self.no_command = (0.0,) * len(APPLIED_COMMAND_NAMES)
+        self.command_columns = slice(1, 1 + len(APPLIED_COMMAND_NAMES))
+        self.state_values = operator.attrgetter('time_s', *STATE_FIELDS)
+        # a row per publication: the commands' time (-1: none), the command values in
+        # APPLIED_COMMAND_NAMES' order, the state's time and STATE_FIELDS
+        self.rows = np.empty((capacity, 1 + len(APPLIED_COMMAND_NAMES) + 1 + len(STATE_FIELDS)))
+        self.row = struct.Struct(f'={self.rows.shape[1]}d')  # native doubles, as the array's
+        self.samples = (
+            None if self.sample is None
+            else np.empty((capacity, len(self.sample(sim.state))))
+        )
+        # row -> the state whose energy ledger that publication carries, booked at flush():
+        # the ledger is a function of the state alone (Simulation.energy_ledger), and computing
+        # a stretch's ledgers back to back costs about half of doing it between physics steps
+        self.ledgers: dict[int, np.ndarray] = {}
+        self.last_command: np.ndarray | None = None
+        self.n = 0
+        self.period_s = 0.5 * writer.flush_period_s
         self.since = time.monotonic()
-        batch = RecordBatch()
-        enc, slots = self.encoder, self.SLOTS
-        if commands:
-            keys = np.array([row[0] for row in commands]) * slots
-            ns = stamps_ns([row[1] for row in commands])
-            values = np.array([row[3] for row in commands], dtype=np.float64)
-            for slot, (topic, rows) in enumerate(enc.commands(values)):
-                batch.add(topic, keys + slot, ns, rows)
-            applied = np.array([row[2] for row in commands], dtype=bool)
-            batch.add(
-                TOPIC_APPLIED_COMMAND, keys[applied] + self.SLOT_APPLIED, ns[applied],
-                enc.applied_commands(ns[applied], values[applied]),
-            )
-        if states:
-            keys = np.array([row[0] for row in states]) * slots
-            ns = stamps_ns([row[1] for row in states])
-            values = np.array([row[2] for row in states], dtype=np.float64)
-            named = dict(zip(STATE_FIELDS, values.T))
-            for slot, (topic, rows) in enumerate(enc.state(ns, named), start=self.SLOT_STATE):
-                batch.add(topic, keys + slot, ns, rows)
-            profiled = np.array([row[3] is not None for row in states], dtype=bool)
-            if profiled.any():
-                r_m = np.array([row[3][0] for row in states if row[3] is not None])
-                z_m = np.array([row[3][1] for row in states if row[3] is not None])
-                batch.add(
-                    TOPIC_MANTLE_PROFILE, keys[profiled] + self.SLOT_PROFILE, ns[profiled],
-                    enc.profiles(ns[profiled], r_m, z_m),
-                )
-            ledgers = [i for i, row in enumerate(states) if row[4] is not None]
-            batch.add(
-                TOPIC_ENERGY_LEDGER, keys[ledgers] + self.SLOT_LEDGER, ns[ledgers],
-                [states[i][4] for i in ledgers],
-            )
-        self.writer.write_batch(batch)
+
+    def add(self, command: Command | None, obs: Observation, start_s: float = -1.0) -> None:
+        """Add a publication, its ledger: the command sent at start_s (None: none), the state."""
+        i = self.n
+        values = self.command_values(command) if command is not None else self.no_command
+        self.rows[i] = (start_s, *values, *self.state_values(obs))
+        if self.samples is not None:
+            self.samples[i] = self.sample(self.sim.state)
+        self.ledgers[i] = self.sim.state.copy()
+        self.n = i + 1
+        self.flush_if_due()
+
+    def record(self, drive: Drive, ledger_every: int) -> int:
+        """
+        Add the publications of a drive (the ledger every ledger_every and with the last).
+
+        Returns how many it yielded. The loop of add() with its lookups hoisted: it runs once
+        per publication, next to the physics it records.
+        """
+        rows, samples, sample, sim = self.rows, self.samples, self.sample, self.sim
+        # a row packed in place (struct: about half numpy's cost of a row from a tuple)
+        row_into, row_bytes = self.row.pack_into, self.row.size
+        command_values, state_values = self.command_values, self.state_values
+        capacity, monotonic, last = self.capacity, time.monotonic, drive.batches
+        period_s = self.period_s
+        # a chunk handed over this many publications before the end: its compression (in the
+        # writer's worker) overlaps the last ones, and close() compresses only a short tail
+        tail = last - max(1, capacity // 3)
+        published = 0
+        for start_s, command, obs in drive:
+            published += 1
+            i = self.n
+            row_into(rows, i * row_bytes, start_s, *command_values(command), *state_values(obs))
+            if samples is not None:
+                samples[i] = sample(sim.state)
+            if published % ledger_every == 0 or published == last:
+                self.ledgers[i] = sim.state.copy()
+            self.n = i + 1  # the publication counts from here on (a signal's flush takes it)
+            if i + 1 == capacity or published == tail or monotonic() - self.since >= period_s:
+                self.flush()
+        return published
+
+    def flush_if_due(self) -> None:
+        if self.n == self.capacity or time.monotonic() - self.since >= self.period_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """Lay out the rows added since the last flush and write them as one chunk."""
+        from pulsejet_sim.bag.cdr import stamps_ns
+        import numpy as np
+
+        n = self.n
+        if not n:
+            return
+        rows = self.rows[:n]
+        commanded = rows[:, 0] >= 0.0
+        command_ns = np.full(n, -1, dtype=np.int64)
+        command_ns[commanded] = stamps_ns(rows[commanded, 0])
+        commands = rows[:, self.command_columns]
+        applied = np.zeros(n, dtype=bool)
+        sent = commands[commanded]
+        last = self.last_command
+        if len(sent):
+            # the applied command is published when the held command changes (sim_node)
+            before = np.empty_like(sent)
+            before[1:] = sent[:-1]
+            if last is not None:
+                before[0] = last
+            changed = np.any(sent != before, axis=1)
+            if last is None:
+                changed[0] = True
+            applied[commanded] = changed
+            last = sent[-1].copy()
+        states = rows[:, self.command_columns.stop:]
+        state_ns = stamps_ns(states[:, 0])
+        ledger, energy_ledger = self.encoder.ledger, self.sim.model.energy_ledger
+        stretch = self.layout.records(
+            command_ns, commands, applied, state_ns, states[:, 1:],
+            None if self.samples is None else self.profiles_of(self.samples[:n]),
+            {row: ledger(energy_ledger(state), int(state_ns[row]))
+             for row, state in self.ledgers.items() if row < n},
+        )
+        # the rows are in the stretch: a signal closing the file from here on finds none left
+        self.n = 0
+        self.layout.counts = stretch.counts
+        self.ledgers, self.last_command = {}, last
+        self.since = time.monotonic()
+        self.writer.write_chunk(stretch)
 
 
 def default_output(scene: Scene) -> Path:

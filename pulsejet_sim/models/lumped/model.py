@@ -733,6 +733,15 @@ class LumpedModel:
         z, shape = self._meridian
         return state[K.Y_B] * shape, z.copy()
 
+    def profile_sample(self, state: np.ndarray) -> np.ndarray:
+        """Return the part of ``state`` profile() reads (a view): the minor semi-axis b."""
+        return state[K.Y_B:K.Y_B + 1]
+
+    def profiles_of_samples(self, samples: np.ndarray):
+        """Return profile() of many states from profile_sample rows: (r_m, z_m), (n, 41) each."""
+        z, shape = self._meridian
+        return samples[:, :1] * shape, np.broadcast_to(z, (len(samples), len(z)))
+
     @functools.cached_property
     def _meridian(self) -> tuple[np.ndarray, np.ndarray]:
         """Return the 41 stations z and r/b there (a is fixed: only b scales a profile)."""

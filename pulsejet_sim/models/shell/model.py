@@ -1287,6 +1287,14 @@ class ShellModel:
         """(r_m, z_m) node arrays of the current meridian (body frame, ring at z = 0)."""
         return self.profile_of(state)
 
+    def profile_sample(self, state: np.ndarray) -> np.ndarray:
+        """Return the part of ``state`` profile() reads (a view): node coordinates, 3 a node."""
+        return state[: 3 * self.n_nodes]
+
+    def profiles_of_samples(self, samples: np.ndarray):
+        """Return profile() of many states from profile_sample rows: (r_m, z_m), (n, nodes)."""
+        return samples[:, 0::3], samples[:, 1::3]
+
     def _linearised(self, state: np.ndarray):
         """
         Return the free dofs and their mass M, stiffness K = -dF/dq and damping C = -dF/dv.
