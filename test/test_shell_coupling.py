@@ -192,6 +192,19 @@ def test_bad_coupling_options_are_refused_with_the_value(scene, message):
         ShellModel.from_scene(scene)
 
 
+#: the muscle of paper 000's Fig. 12 with a constant depth (amplitude x the meridian's max radius)
+CONSTANT_DEPTH_MUSCLE = {
+    'kind': 'muscle',
+    'source': 'routine',
+    'amplitude': 0.25,
+    'desired_radius': 'constant_depth',
+    'taper_fraction': 0.15,
+    'frequency_hz': 1.5,
+    'contraction_s': 0.2,
+    'release_s': 0.3,
+}
+
+
 def test_constant_depth_muscle_moves_the_cone_inwards_by_one_depth():
     """
     Check our reading of Fig. 12 (constant_depth).
@@ -199,16 +212,7 @@ def test_constant_depth_muscle_moves_the_cone_inwards_by_one_depth():
     The desired radius is the rest profile moved inwards by one depth (a line parallel to the
     cone's wall) over the middle of the mantle.
     """
-    muscle = {
-        'kind': 'muscle',
-        'source': 'routine',
-        'amplitude': 0.25,
-        'desired_radius': 'constant_depth',
-        'taper_fraction': 0.15,
-        'frequency_hz': 1.5,
-        'contraction_s': 0.2,
-        'release_s': 0.3,
-    }
+    muscle = dict(CONSTANT_DEPTH_MUSCLE)
     model = ShellModel.from_scene(cone_scene('paper', actuation=muscle))
     r0m = model.E[:, sk.E_R0M]
     depth = 0.25 * model.E[:, sk.E_SMUS] * r0m  # r0 - r_desired at full activation
@@ -234,16 +238,7 @@ def test_constant_depth_takes_the_meridians_largest_radius_not_the_midpoints(ele
     falls half an element's rise short of it (a first-order error in every depth, which made the
     muscle-driven cone converge at first order: benchmarks/results/paper000_study/muscle_depth.md).
     """
-    muscle = {
-        'kind': 'muscle',
-        'source': 'routine',
-        'amplitude': 0.25,
-        'desired_radius': 'constant_depth',
-        'taper_fraction': 0.15,
-        'frequency_hz': 1.5,
-        'contraction_s': 0.2,
-        'release_s': 0.3,
-    }
+    muscle = dict(CONSTANT_DEPTH_MUSCLE)
     scene = cone_scene('paper', elements=elements, actuation=muscle)
     if geometry == 'ellipsoid':
         scene['geometry'] = {
