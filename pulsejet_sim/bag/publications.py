@@ -198,18 +198,20 @@ class PublicationLayout:
         c_seq = np.cumsum(commanded, dtype=np.int64)
         for start, channel, heads in _heads(c_part, counts, c_seq, command_ns):
             rows[:, start + _SEQUENCE:start + _HEAD.size] = heads
+        values = _bytes(commands, '<f8')  # each value's 8 bytes, one conversion for all
         for start, column in zip(c_part.starts, self.command_columns):
-            rows[:, start + _HEAD.size + 4:start + _HEAD.size + 12] = _bytes(
-                commands[:, column], '<f8'
-            )
+            rows[:, start + _HEAD.size + 4:start + _HEAD.size + 12] = values[
+                :, 8 * column:8 * column + 8
+            ]
         s_seq = np.arange(1, n + 1, dtype=np.int64)
         for start, channel, heads in _heads(s_part, counts, s_seq, state_ns):
             rows[:, wc + start + _SEQUENCE:wc + start + _HEAD.size] = heads
         stamps = _stamps(state_ns)
         for at in self.state_stamps:
             rows[:, wc + at:wc + at + 8] = stamps
+        values = _bytes(states, '<f8')
         for at, column in self.state_values:
-            rows[:, wc + at:wc + at + 8] = _bytes(states[:, column], '<f8')
+            rows[:, wc + at:wc + at + 8] = values[:, 8 * column:8 * column + 8]
         if self.profile_points is not None:
             r_m, z_m = profiles
             points = np.zeros((n, self.profile_points, 3), dtype='<f4')

@@ -796,15 +796,20 @@ class _FastChunk:
         stream.write(packed)
         chunk_length = len(head) + len(packed)
         index_start = chunk_start + chunk_length
-        offsets, parts, at = {}, [], index_start
+        # every channel's (log time, offset) entries in one array: one conversion, then a slice
+        # of its bytes per channel
+        entries = np.concatenate([table for _, table in stretch.index]).astype('<u8')
+        if shift:
+            entries[:, 1] += np.uint64(shift)
+        data = entries.tobytes()
+        offsets, parts, at, done = {}, [], index_start, 0
         for channel, table in stretch.index:
-            if shift:
-                table = table + np.array([0, shift], dtype='<u8')
-            body = table.astype('<u8', copy=False).tobytes()
-            parts.append(struct.pack('<BQHI', 7, 6 + len(body), channel, len(body)))
-            parts.append(body)
+            length = 16 * len(table)
+            parts.append(struct.pack('<BQHI', 7, 6 + length, channel, length))
+            parts.append(data[done:done + length])
+            done += length
             offsets[channel] = at
-            at += 15 + len(body)
+            at += 15 + length
         stream.write(b''.join(parts))
         self.chunk_indexes.append(ChunkIndex(
             message_start_time=stretch.first_ns,

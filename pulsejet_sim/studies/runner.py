@@ -228,25 +228,6 @@ class _RunColumns:
         self.period_s = 0.5 * writer.flush_period_s
         self.since = time.monotonic()
 
-    def _sample_bytes(self):
-        """Return a function of no argument: the bytes of the current state's profile sample."""
-        import numpy as np
-
-        sim, sample = self.sim, self.sample
-        state = sim.state
-        view = sample(state)
-        if np.shares_memory(view, state):
-            # a view of the state, which the physics changes in place: its bytes are the sample
-            def current() -> bytes:
-                nonlocal state, view
-                if sim.state is not state:  # reset() replaced the array
-                    state = sim.state
-                    view = sample(state)
-                return view.tobytes()
-
-            return current
-        return lambda: sample(sim.state).tobytes()
-
     def add(self, command: Command | None, obs: Observation, start_s: float = -1.0) -> None:
         """Add a publication, its ledger: the command sent at start_s (None: none), the state."""
         if self.sample is not None:
@@ -262,10 +243,16 @@ class _RunColumns:
         Returns how many it yielded. The loop of add() with its lookups hoisted: it runs once
         per publication, next to the physics it records.
         """
-        publications, samples, sim = self.publications, self.samples, self.sim
-        append = publications.append
-        sample = None if self.sample is None else self._sample_bytes()
-        add_sample = samples.append
+        import numpy as np
+
+        publications, samples, sim, sample = self.publications, self.samples, self.sim, self.sample
+        append, add_sample = publications.append, samples.append
+        # the profile sample: a view of the state (the physics changes it in place) whose bytes
+        # are taken per publication, or the model's sample of each state
+        state = sim.state
+        view = None if sample is None else sample(state)
+        if view is not None and not np.shares_memory(view, state):
+            view = None
         capacity, monotonic, last = self.capacity, time.monotonic, drive.batches
         period_s = self.period_s
         # a chunk handed over this many publications before the end: its compression (in the
@@ -274,8 +261,10 @@ class _RunColumns:
         published = 0
         for publication in drive:
             published += 1
-            if sample is not None:
-                add_sample(sample())
+            if view is not None and sim.state is state:
+                add_sample(view.tobytes())
+            elif sample is not None:  # not a view, or reset() replaced the state
+                add_sample(sample(sim.state).tobytes())
             if published % ledger_every == 0 or published == last:
                 self.ledgers[len(publications)] = sim.state.copy()
             append(publication)  # the publication counts from here on (a signal's flush takes it)
