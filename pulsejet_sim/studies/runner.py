@@ -153,9 +153,8 @@ class _RunColumns:
     model's profile sample (the state changes in place) and, every LEDGER_PERIOD_S, a copy of
     the state for its energy ledger. flush() turns a chunk's publications into columns, books
     their ledgers, lays out their records with numpy (PublicationLayout.records) and writes them
-    as one MCAP chunk (BagWriter.write_chunk): the work per publication between physics steps is
-    the least it can be, the rest is done a chunk at a time, where it costs about half
-    (benchmarks/results/recording.md).
+    as one MCAP chunk (BagWriter.write_chunk). Between physics steps a publication costs two
+    appends and a copy; packing its values into rows is done a chunk at a time.
     """
 
     #: publications per chunk; None: as many as fill the writer's chunk size

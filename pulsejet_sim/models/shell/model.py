@@ -1236,7 +1236,7 @@ class ShellModel:
         ]
 
     def _stored_with(self, state, k_own: float, k_am: float):
-        """The stored energies of state, J, given the nodes' kinetic energies k_own and k_am."""
+        """Return the stored energies of state, J, given the kinetic energies k_own and k_am."""
         n1 = self.n_nodes
         st, _, _, kint = self._eval(state)
         U = float(state[6 * n1 + sk.S_U])
