@@ -64,11 +64,11 @@ class Stretch:
     """
     The records of a stretch of publications, ready for BagWriter.write_chunk.
 
-    records: the Message records back to back, as a list of buffers (bytes or uint8 arrays;
-    the file holds them joined) of size bytes in all; index: (channel id, (k, 2) uint64 array of
-    log time and offset in records) per channel, in order of first appearance; first_ns, last_ns:
-    the smallest and largest log time; counts: each channel's message count after it (the
-    layout's counts to continue from once the stretch is written).
+    records: the Message records back to back, as a list of bytes-like objects (bytes,
+    memoryviews; the file holds them joined) of size bytes in all; index: (channel id, (k, 2)
+    uint64 array of log time and offset in records) per channel, in order of first appearance;
+    first_ns, last_ns: the smallest and largest log time; counts: each channel's message count
+    after it (the layout's counts to continue from once the stretch is written).
     """
 
     records: list
@@ -244,23 +244,30 @@ class PublicationLayout:
         # publications (commands, no applied command, no ledger) are copied a stretch at a time
         special = ~commanded | applied
         special[ledger_rows] = True
-        pieces, done = [], 0
-        a_at = np.cumsum(applied) - 1  # each publication's row in a_rows
+        # slices of the rows' bytes (memoryviews: a slice costs no numpy call)
+        width = wc + ws
+        flat = memoryview(rows).cast('B')
+        a_flat = memoryview(a_rows).cast('B') if len(a_rows) else None
+        is_commanded, is_applied = commanded.tolist(), applied.tolist()
+        pieces, done, a_row = [], 0, 0
         for row in np.flatnonzero(special).tolist():
             if row > done:
-                pieces.append(rows[done:row].reshape(-1))
-            if not commanded[row]:
-                pieces.append(rows[row, wc:])
-            elif applied[row]:
-                pieces += [rows[row, :wc], a_rows[a_at[row]], rows[row, wc:]]
+                pieces.append(flat[done * width:row * width])
+            at = row * width
+            if not is_commanded[row]:
+                pieces.append(flat[at + wc:at + width])
+            elif is_applied[row]:  # every applied row is special: a_row counts them in order
+                pieces += [flat[at:at + wc], a_flat[a_row * wa:(a_row + 1) * wa],
+                           flat[at + wc:at + width]]
+                a_row += 1
             else:
-                pieces.append(rows[row])
+                pieces.append(flat[at:at + width])
             if row in ledger_records:
                 pieces.append(ledger_records[row])
             done = row + 1
         if done < n:
-            pieces.append(rows[done:].reshape(-1))
-        size = sum(len(piece) if isinstance(piece, bytes) else piece.nbytes for piece in pieces)
+            pieces.append(flat[done * width:])
+        size = sum(map(len, pieces))
         # -- message indexes (log time, offset), channels in order of first appearance
         sizes = commanded * wc + applied * wa + ws
         if ledger_rows:
@@ -273,7 +280,10 @@ class PublicationLayout:
             tables = np.empty((len(c_part.starts), len(c_starts), 2), dtype='<u8')
             tables[:, :, 0] = c_ns
             tables[:, :, 1] = c_starts + np.array(c_part.starts)[:, None]
-            index += [(int(t[0, 1]), c, t) for c, t in zip(c_part.channels, tables)]
+            first = int(c_starts[0])
+            index += [
+                (first + at, c, t) for at, c, t in zip(c_part.starts, c_part.channels, tables)
+            ]
             counts.update((c, counts[c] + len(c_starts)) for c in c_part.channels)
         if len(a_rows):
             table = np.stack([command_ns[applied], starts[applied] + wc], axis=1).astype('<u8')
@@ -283,7 +293,8 @@ class PublicationLayout:
         tables[:, :, 0] = state_ns
         s_base = starts + commanded * wc + applied * wa
         tables[:, :, 1] = s_base + np.array(s_part.starts)[:, None]
-        index += [(int(t[0, 1]), c, t) for c, t in zip(s_part.channels, tables)]
+        first = int(s_base[0])
+        index += [(first + at, c, t) for at, c, t in zip(s_part.starts, s_part.channels, tables)]
         counts.update((c, counts[c] + n) for c in s_part.channels)
         if ledger_rows:
             table = np.empty((len(ledger_rows), 2), dtype='<u8')
