@@ -773,7 +773,9 @@ class _FastChunk:
             import zstandard
 
             self.compressor = zstandard.ZstdCompressor(level=level)
-        data = b''.join(pieces)  # here: the worker holding the GIL for the copy could stall us
+        # one piece (a laid-out stretch, no schema or channel record before it) is compressed as
+        # it is; several are joined here: the worker holding the GIL for the copy could stall us
+        data = memoryview(pieces[0]).cast('B') if len(pieces) == 1 else b''.join(pieces)
         job = _Job(lambda: _compress(data, compression, self.compressor))
         if _ChunkCompressor.in_thread:
             _ChunkCompressor.shared().submit(job)
