@@ -19,9 +19,23 @@ _NS_PER_S = 1_000_000_000
 
 @njit(cache=True, nogil=True, inline='always')
 def _put(out, at, value, size):
-    """Write a non-negative integer as size bytes, little endian."""
+    """Write a non-negative integer as size bytes, little endian (indexing as _copy does)."""
+    dest = out[at:at + size]
     for i in range(size):
-        out[at + i] = (value >> (8 * i)) & 0xFF
+        dest[i] = (value >> (8 * i)) & 0xFF
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _copy(out, at, data):
+    """
+    Copy data into out from at.
+
+    An element loop on a slice of out, indexed from 0 up: about four times faster than numba's
+    slice assignment, and than indexing out at at + i (a possibly negative index, checked).
+    """
+    dest = out[at:at + len(data)]
+    for i in range(len(data)):
+        dest[i] = data[i]
 
 
 @njit(cache=True, nogil=True)
@@ -53,20 +67,20 @@ def lay_out(
     for row in range(len(state_ns)):
         if commanded[row]:
             ns = command_ns[row]
-            out[pos:pos + wc] = template_c
+            _copy(out, pos, template_c)
             for j in range(len(c_starts)):
                 at = pos + c_starts[j]
                 _put(out, at + _SEQUENCE, c_sequence[j] + kc + 1, 4)
                 _put(out, at + _LOG_TIME, ns, 8)
                 _put(out, at + _PUBLISH_TIME, ns, 8)
                 scratch[0] = commands[row, c_columns[j]]
-                out[at + _HEAD_SIZE + 4:at + _HEAD_SIZE + 12] = scratch_bytes
+                _copy(out, at + _HEAD_SIZE + 4, scratch_bytes)
                 index_c[j, kc, 0] = ns
                 index_c[j, kc, 1] = at
             kc += 1
             pos += wc
             if applied[row]:
-                out[pos:pos + wa] = template_a
+                _copy(out, pos, template_a)
                 _put(out, pos + _SEQUENCE, a_sequence + ka + 1, 4)
                 _put(out, pos + _LOG_TIME, ns, 8)
                 _put(out, pos + _PUBLISH_TIME, ns, 8)
@@ -74,13 +88,13 @@ def lay_out(
                 _put(out, pos + _HEAD_SIZE + 8, ns % _NS_PER_S, 4)
                 for i in range(commands.shape[1]):
                     scratch[0] = commands[row, i]
-                    out[pos + a_positions + 8 * i:pos + a_positions + 8 * i + 8] = scratch_bytes
+                    _copy(out, pos + a_positions + 8 * i, scratch_bytes)
                 index_a[ka, 0] = ns
                 index_a[ka, 1] = pos
                 ka += 1
                 pos += wa
         ns = state_ns[row]
-        out[pos:pos + ws] = template_s
+        _copy(out, pos, template_s)
         for j in range(len(s_starts)):
             at = pos + s_starts[j]
             _put(out, at + _SEQUENCE, s_sequence[j] + row + 1, 4)
@@ -93,13 +107,13 @@ def lay_out(
             _put(out, pos + at + 4, ns % _NS_PER_S, 4)
         for j in range(len(value_ats)):
             scratch[0] = states[row, value_columns[j]]
-            out[pos + value_ats[j]:pos + value_ats[j] + 8] = scratch_bytes
+            _copy(out, pos + value_ats[j], scratch_bytes)
         for p in range(points):  # Point32: x = axial position, y = radius, z = 0 (template)
             at = pos + profile_at + 12 * p
             single[0] = z_m[row, p]
-            out[at:at + 4] = single_bytes
+            _copy(out, at, single_bytes)
             single[0] = r_m[row, p]
-            out[at + 4:at + 8] = single_bytes
+            _copy(out, at + 4, single_bytes)
         pos += ws
         start, stop = ledger_bounds[row], ledger_bounds[row + 1]
         if stop > start:
@@ -110,7 +124,7 @@ def lay_out(
             _put(out, pos + _SEQUENCE, ledger_sequence + kl + 1, 4)
             _put(out, pos + _LOG_TIME, ns, 8)
             _put(out, pos + _PUBLISH_TIME, ns, 8)
-            out[pos + _HEAD_SIZE:pos + _HEAD_SIZE + size] = ledger_data[start:stop]
+            _copy(out, pos + _HEAD_SIZE, ledger_data[start:stop])
             index_l[kl, 0] = ns
             index_l[kl, 1] = pos
             kl += 1
