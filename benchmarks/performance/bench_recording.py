@@ -11,7 +11,7 @@ timed run:
 - record: runner.run_scene with an MCAP output (what `pulsejet run` times: physics, each
   publication kept as the drive yields it with its profile sample's bytes, the state every
   LEDGER_PERIOD_S for its energy ledger; at each flush the rows packed, the ledgers booked (the
-  shell's at once: energy_ledgers), a chunk of publications laid out with numpy by
+  shell's at once: energy_ledgers), a chunk of publications laid out in one call by
   bag.publications and written by BagWriter.write_chunk, compressed in the writer's worker
   thread; the file closed);
   its main-thread CPU time (time.thread_time) against the physics' is given too: the ratio a
@@ -310,7 +310,7 @@ def main(argv=None) -> int:
         'runner.run_scene without an output (observation per publication, no recording); '
         "record: runner.run_scene to MCAP (per publication the drive's tuple and the profile "
         "sample's bytes kept; at each flush the rows packed, the ledgers booked and a 768 KiB "
-        'chunk laid out with numpy by bag.publications, zstd level -3 in '
+        "chunk laid out by bag.publications' numba kernel, zstd level -3 in "
         "the writer's worker thread); CPU: "
         "the same two runs' main-thread CPU time (time.thread_time), physics / record: the "
         'ratio with a core free for the compression, whatever the load; per publication: the '
