@@ -130,3 +130,37 @@ def lay_out(
             kl += 1
             pos += _HEAD_SIZE + size
     return pos, kc, ka, kl
+
+
+@njit(cache=True, nogil=True)
+def stamps_and_changes(rows, state_column, last, has_last):
+    """
+    Return the stamps of a stretch's rows and which publish the applied command.
+
+    rows: (n, columns) float64: the commands' time in s (negative: no commands), the command
+    values from column 1 to state_column, the state's time in s at state_column (times checked
+    by the caller: finite, in [0, 2^31) s). last: the command held before the stretch (has_last:
+    one is). Returns (command_ns, -1 where no commands; state_ns; applied: the command differs
+    from the one held before it; the last command held, whether one is), the ns rounded as
+    cdr.stamps_ns rounds them (np.rint of s * 1e9).
+    """
+    n = rows.shape[0]
+    command_ns = np.empty(n, dtype=np.int64)
+    state_ns = np.empty(n, dtype=np.int64)
+    applied = np.zeros(n, dtype=np.bool_)
+    held = last.copy()
+    for row in range(n):
+        t = rows[row, 0]
+        if t >= 0.0:
+            command_ns[row] = np.int64(np.rint(t * 1e9))
+            changed = not has_last
+            for j in range(1, state_column):
+                if rows[row, j] != held[j - 1]:
+                    changed = True
+                held[j - 1] = rows[row, j]
+            applied[row] = changed
+            has_last = True
+        else:
+            command_ns[row] = -1
+        state_ns[row] = np.int64(np.rint(rows[row, state_column] * 1e9))
+    return command_ns, state_ns, applied, held, has_last

@@ -248,11 +248,18 @@ class PublicationLayout:
 
 def warm_kernel() -> None:
     """
-    Compile (or load from numba's cache) the layout kernel, with the argument types a run uses.
+    Compile (or load from numba's cache) the recording's kernels, with the argument types a run
+    uses (publication_kernel: lay_out, stamps_and_changes).
 
-    `make venv` calls it, so the first `pulsejet run` does not compile it.
+    `make venv` calls it, so the first `pulsejet run` does not compile them.
     """
     from pulsejet_sim.bag.cdr import RECORDED_TOPICS
+    from pulsejet_sim.bag.publication_kernel import stamps_and_changes
+
+    # the runner's rows: read-only doubles (np.frombuffer of the packed publications)
+    columns = 2 + len(APPLIED_COMMAND_NAMES) + len(STATE_FIELDS)
+    rows = np.frombuffer(np.zeros((2, columns)).tobytes()).reshape(2, columns)
+    stamps_and_changes(rows, 1 + len(APPLIED_COMMAND_NAMES), np.zeros(3), False)
 
     layout = PublicationLayout({topic: i for i, topic in enumerate(RECORDED_TOPICS)}, 3)
     layout.records(

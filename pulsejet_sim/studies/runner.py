@@ -280,32 +280,26 @@ class _RunColumns:
     def flush(self) -> None:
         """Lay out the publications added since the last flush and write them as one chunk."""
         from pulsejet_sim.bag.cdr import stamps_ns
+        from pulsejet_sim.bag.publication_kernel import stamps_and_changes
         import numpy as np
 
         n = len(self.publications)
         if not n:
             return
         rows = self.rows(self.publications[:n])
-        commanded = rows[:, 0] >= 0.0
-        command_ns = np.full(n, -1, dtype=np.int64)
-        command_ns[commanded] = stamps_ns(rows[commanded, 0])
-        commands = rows[:, self.command_columns]
-        applied = np.zeros(n, dtype=bool)
-        sent = commands[commanded]
+        stop = self.command_columns.stop  # the state's time
+        sent, times = rows[:, 0], rows[:, stop]
+        if not (sent.max() < 2.0**31 and times.min() >= 0.0 and times.max() < 2.0**31):
+            stamps_ns(times)  # ValueError naming a time that is no ROS stamp (or a NaN)
+            stamps_ns(sent[sent >= 0.0])
+        # the stamps, and the applied command published when the held command changes (sim_node)
         last = self.last_command
-        if len(sent):
-            # the applied command is published when the held command changes (sim_node)
-            before = np.empty_like(sent)
-            before[1:] = sent[:-1]
-            if last is not None:
-                before[0] = last
-            changed = np.any(sent != before, axis=1)
-            if last is None:
-                changed[0] = True
-            applied[commanded] = changed
-            last = sent[-1].copy()
-        states = rows[:, self.command_columns.stop:]
-        state_ns = stamps_ns(states[:, 0])
+        command_ns, state_ns, applied, held, has_held = stamps_and_changes(
+            rows, stop, np.zeros(stop - 1) if last is None else last, last is not None
+        )
+        last = held if has_held else None
+        commands = rows[:, self.command_columns]
+        states = rows[:, stop:]
         profiles = None
         if self.sample is not None:
             samples = np.frombuffer(b''.join(self.samples[:n])).reshape(n, self.sample_values)
