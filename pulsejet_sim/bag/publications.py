@@ -250,7 +250,8 @@ def warm_kernel() -> None:
     """
     Compile (or load from numba's cache) the recording's kernels, with a run's argument types.
 
-    publication_kernel's lay_out and stamps_and_changes. `make venv` calls it, so the first `pulsejet run` does not compile them.
+    publication_kernel's lay_out and stamps_and_changes. `make venv` calls it, so the first
+    `pulsejet run` does not compile them.
     """
     from pulsejet_sim.bag.cdr import RECORDED_TOPICS
     from pulsejet_sim.bag.publication_kernel import stamps_and_changes
