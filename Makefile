@@ -18,6 +18,8 @@ $(STAMP): requirements.txt setup.py setup.cfg
 	# pip's editable install does not run setup.py develop, whose hook warms numba's cache:
 	# compile the shipped scenes' kernels once here, so no node compiles at its first start
 	$(PY) -m pulsejet_sim.engine.warmup --quiet
+	# and the offline recording's layout kernel, so the first `pulsejet run` does not compile it
+	$(PY) -c 'from pulsejet_sim.bag.publications import warm_kernel; warm_kernel()'
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -2,11 +2,11 @@
 The offline recording path: batched CDR records, the same messages, readable by rosbags and ours.
 
 `pulsejet run` lays out a chunk of publications at a time with numpy (bag.publications) and
-writes it with BagWriter.write_chunk; BagWriter.write_records / write_batch append bag.cdr bytes
-to mcap's open chunk. These tests hold the batched paths to the file the public per-message path
-writes, byte for byte, the runner's chunks to the messages of a write_records call per
-publication, message for message, and the recording of both default scenes to what a ROS reader
-and the project's reader decode, value for value against the physics.
+writes it with BagWriter.write_chunk; BagWriter.write_records appends a publication's bag.cdr
+bytes to mcap's open chunk. These tests hold write_records and write_chunk to the file the public
+per-message path writes, byte for byte, the runner's chunks to the messages of a write_records
+call per publication, message for message, and the recording of both default scenes to what a
+ROS reader and the project's reader decode, value for value against the physics.
 """
 
 import datetime
@@ -254,44 +254,6 @@ def test_column_encoder_rows_are_the_per_message_bytes():
         columns.profiles(ns[:2], r_m[:2], z_m[:3])
 
 
-@pytest.mark.parametrize('compression', ['zstd', 'none'])
-def test_a_batch_writes_the_file_per_message_writes_write(
-    tmp_path, fixed_close_time, monkeypatch, compression
-):
-    """write_batch: chunks ending inside a batch, topics first seen mid-batch; byte for byte."""
-    from pulsejet_sim.bag.batch import RecordBatch
-
-    batches = runner_batches('shell_robot', 0.3)
-    per_message = tmp_path / 'per_message' / 'run.mcap'
-    write_file(per_message, batches, batched=False, compression=compression)
-    # every message its own key, in write order; grouped by topic into blocks
-    blocks: dict[str, list] = {}
-    key = 0
-    for ns, records in batches:
-        for topic, data in records:
-            blocks.setdefault(topic, []).append((key, ns, data))
-            key += 1
-    for fast in (True, False):
-        if not fast:
-            monkeypatch.setattr(bag_writer._FastChunk, 'attach', classmethod(lambda c, w, s: None))
-        out = tmp_path / ('fast' if fast else 'public') / 'run.mcap'
-        with bag_writer.BagWriter(
-            out, compression=compression, chunk_size_bytes=3000, flush_period_s=1e6
-        ) as bag:
-            bag.add_metadata('pulsejet', {'scene': 'test'})
-            for part in (slice(0, 40), slice(40, None)):  # two batches
-                batch = RecordBatch()
-                for topic, items in blocks.items():
-                    items = [x for x in items if x[0] in range(key)[part]]
-                    sizes = {len(x[2]) for x in items}
-                    rows = (np.array([np.frombuffer(x[2], np.uint8) for x in items])
-                            if len(sizes) == 1 else [x[2] for x in items])
-                    batch.add(topic, [x[0] for x in items], [x[1] for x in items], rows)
-                bag.write_batch(batch)
-        assert (bag._fast is not None) == fast
-        assert out.read_bytes() == per_message.read_bytes()
-
-
 CHILD_RUN = """
 import sys
 from pulsejet_sim.scene import load_scene
@@ -346,26 +308,20 @@ def test_ctrl_c_mid_run_writes_every_publication_collected(tmp_path):
     assert info.counts['/pulsejet/cmd/cable_force'] in (state_count - 1, state_count)
 
 
-@pytest.mark.parametrize('compression, fast', [('zstd', True), ('lz4', True), ('none', True),
-                                               ('zstd', False)])
-def test_publication_layout_writes_the_per_message_encoders_bytes(
-    tmp_path, monkeypatch, compression, fast
-):
+def write_layout_file(out: Path, compression: str, zstd_level: int = 1) -> tuple[list, list]:
     """
-    bag.publications + write_chunk: every kind of publication, read back by rosbags and mcap.
+    Write 12 publications of every kind with bag.publications + write_chunk, in two chunks.
 
     Publications without commands (the initial state), with the applied command (the first and
-    on a change), with a ledger, over two chunks; each message the bytes TopicEncoder writes.
+    on a change), with a ledger. Returns the (topic, log time, bytes) TopicEncoder writes for them
+    and the applied commands' positions.
     """
     from pulsejet_sim.bag.publications import PublicationLayout, STATE_FIELDS, STATE_ORDER
     from pulsejet_sim.core.model_io import Command, Observation
     from pulsejet_sim.core.topics import (
-        APPLIED_COMMAND_NAMES, COMMAND_TOPICS, TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER,
-        TOPIC_MANTLE_PROFILE,
+        COMMAND_TOPICS, TOPIC_APPLIED_COMMAND, TOPIC_ENERGY_LEDGER, TOPIC_MANTLE_PROFILE,
     )
 
-    if not fast:
-        monkeypatch.setattr(bag_writer._FastChunk, 'attach', classmethod(lambda c, w, s: None))
     rng = np.random.default_rng(3)
     n, points = 12, 5
     times = np.arange(n) * 0.01 + 0.01
@@ -382,8 +338,8 @@ def test_publication_layout_writes_the_per_message_encoders_bytes(
                                    int(state_ns[row])) for row in (0, 5, 11)}
     applied = np.ones(n, dtype=bool)
     applied[4] = False
-    out = tmp_path / 'layout.mcap'
-    with bag_writer.BagWriter(out, compression=compression) as bag:
+    with bag_writer.BagWriter(out, compression=compression, zstd_level=zstd_level) as bag:
+        bag.add_metadata('pulsejet', {'scene': 'test'})
         topics = [*STATE_ORDER, TOPIC_MANTLE_PROFILE, TOPIC_ENERGY_LEDGER, *COMMAND_TOPICS,
                   TOPIC_APPLIED_COMMAND]
         layout = PublicationLayout(bag.channel_ids(topics), points, encoder)
@@ -412,6 +368,22 @@ def test_publication_layout_writes_the_per_message_encoders_bytes(
         expected.append((TOPIC_MANTLE_PROFILE, ns, encoder.profile(r_m[i], z_m[i], ns)))
         if i in ledgers:
             expected.append((TOPIC_ENERGY_LEDGER, ns, ledgers[i]))
+    positions = [list(commands[i]) for i in range(n) if command_ns[i] >= 0 and applied[i]]
+    return expected, positions
+
+
+@pytest.mark.parametrize('compression, fast', [('zstd', True), ('lz4', True), ('none', True),
+                                               ('zstd', False)])
+def test_publication_layout_writes_the_per_message_encoders_bytes(
+    tmp_path, monkeypatch, compression, fast
+):
+    """bag.publications + write_chunk: each message the bytes TopicEncoder writes, read back."""
+    from pulsejet_sim.core.topics import APPLIED_COMMAND_NAMES
+
+    if not fast:
+        monkeypatch.setattr(bag_writer._FastChunk, 'attach', classmethod(lambda c, w, s: None))
+    out = tmp_path / 'layout.mcap'
+    expected, applied = write_layout_file(out, compression)
     got = mcap_messages(out)
     assert [(t, log, data) for t, log, _, _, data in got] == [
         ('/' + t if not t.startswith('/') else t, ns, data) for t, ns, data in expected]
@@ -426,5 +398,25 @@ def test_publication_layout_writes_the_per_message_encoders_bytes(
                    reader.messages()]
     assert len(decoded) == len(expected)
     positions = [list(m.position) for t, m in decoded if t == '/pulsejet/applied_command']
-    assert positions == [list(commands[i]) for i in range(n) if command_ns[i] >= 0 and applied[i]]
+    assert positions == applied and len(applied) == 10  # 11 with commands, one of them held
     assert APPLIED_COMMAND_NAMES == ('pump_flow_m3_s', 'valve_opening', 'cable_force_n')
+
+
+# mcap's writer compresses a chunk with zstandard.compress (level 3) and lz4.frame.compress
+@pytest.mark.parametrize('compression, zstd_level', [('zstd', 3), ('lz4', 1), ('none', 1)])
+def test_write_chunk_writes_the_file_mcaps_writer_writes(
+    tmp_path, fixed_close_time, monkeypatch, compression, zstd_level
+):
+    """
+    write_chunk's chunk, message indexes, chunk index and statistics, byte for byte.
+
+    Against the same records through mcap's add_message and a flush after each stretch (the
+    writer's path for an mcap library that does not look as expected): the same file.
+    """
+    fast = tmp_path / 'fast' / 'run.mcap'  # same name: the rosbag2 metadata has it
+    write_layout_file(fast, compression, zstd_level)
+    monkeypatch.setattr(bag_writer._FastChunk, 'attach', classmethod(lambda c, w, s: None))
+    public = tmp_path / 'public' / 'run.mcap'
+    write_layout_file(public, compression, zstd_level)
+    assert mcap_summary(fast).statistics.chunk_count == 2
+    assert fast.read_bytes() == public.read_bytes()

@@ -9,10 +9,11 @@ timed run:
 - physics: runner.run_scene without an output (Simulation.step per publication period, the
   observation after each; no recording);
 - record: runner.run_scene with an MCAP output (what `pulsejet run` times: physics, each
-  publication's command, state and profile sample in rows of preallocated arrays, the state
-  every LEDGER_PERIOD_S for its energy ledger (booked at each flush), a chunk of publications
-  laid out with numpy by bag.publications and
-  written by BagWriter.write_chunk, compressed in the writer's worker thread, the file closed);
+  publication kept as the drive yields it with its profile sample's bytes, the state every
+  LEDGER_PERIOD_S for its energy ledger; at each flush the rows packed, the ledgers booked (the
+  shell's at once: energy_ledgers), a chunk of publications laid out in one call by
+  bag.publications and written by BagWriter.write_chunk, compressed in the writer's worker
+  thread; the file closed);
   its main-thread CPU time (time.thread_time) against the physics' is given too: the ratio a
   machine with a free core for the compression would see, whatever the load;
 - per publication: the same messages written with one BagWriter.write_records call per
@@ -20,10 +21,12 @@ timed run:
   messages);
 - rclpy record (only when rclpy imports): the same topics written the way the runner did before,
   an rclpy message per sample (ros/messages.py) serialised by rclpy, for comparison;
-- without writing: run_scene with the collected rows dropped at every flush (the collection per
-  publication with the model's profile sample and, for the ledger, a copy of the state; the file
-  opened and closed; no ledger booked, no layout, compression or chunk): the bound on the ratio
-  however fast the ledger, the layout and the writing get;
+- without writing: run_scene with the collected publications dropped at every flush (the
+  collection per publication: the drive's tuple, the profile sample's bytes and, for the
+  ledger, a copy of the state; the file opened and closed; no rows packed, no ledger booked, no
+  layout, compression or chunk): the bound on the ratio however fast the flush gets;
+- without ledgers: record with no energy ledger booked (not the same file: what the 5 Hz
+  ledgers cost, the model's and their CDR text);
 - summary: analysis.summarize of the recording (the read-back `pulsejet run` prints after the run;
   not part of the ratio).
 
@@ -88,9 +91,30 @@ def record_without_writing(name: str, duration_s: float, out: Path) -> float:
     original = runner._RunColumns.flush
 
     def drop(columns):
-        columns.n, columns.ledgers = 0, {}
+        del columns.publications[:], columns.samples[:]
+        columns.ledgers = {}
 
     runner._RunColumns.flush = drop
+    try:
+        return record(name, duration_s, out)[0]
+    finally:
+        runner._RunColumns.flush = original
+
+
+def record_without_ledgers(name: str, duration_s: float, out: Path) -> float:
+    """
+    Time run_scene with no energy ledger booked (not the same file: no ledger messages).
+
+    Against record, what the ledgers cost: the model's (the shell's energy_ledgers) and their
+    CDR text.
+    """
+    original = runner._RunColumns.flush
+
+    def without_ledgers(columns):
+        columns.ledgers = {}
+        original(columns)
+
+    runner._RunColumns.flush = without_ledgers
     try:
         return record(name, duration_s, out)[0]
     finally:
@@ -244,7 +268,7 @@ def main(argv=None) -> int:
                 record_with_rclpy(name, 0.2, fresh())
             times: dict[str, list[float]] = {
                 'physics': [], 'record': [], 'physics_cpu': [], 'record_cpu': [], 'rclpy': [],
-                'summary': [], 'no_writing': [], 'per_pub': [],
+                'summary': [], 'no_writing': [], 'per_pub': [], 'no_ledgers': [],
             }
             for _ in range(args.repeats):  # interleaved: the machine's load hits all alike
                 gc.collect()
@@ -257,6 +281,7 @@ def main(argv=None) -> int:
                 times['record_cpu'].append(cpu)
                 size = out.stat().st_size
                 times['summary'].append(summary(out))
+                times['no_ledgers'].append(record_without_ledgers(name, args.duration, fresh()))
                 times['no_writing'].append(record_without_writing(name, args.duration, fresh()))
                 times['per_pub'].append(record_per_publication(name, args.duration, fresh()))
                 if with_rclpy:
@@ -283,23 +308,25 @@ def main(argv=None) -> int:
         '(wall s, real-time factor in brackets), each recording to a new file, the garbage '
         'collected before each timed run. physics: '
         'runner.run_scene without an output (observation per publication, no recording); '
-        'record: runner.run_scene to MCAP (rows per publication; at each flush the ledgers '
-        'booked and a 768 KiB chunk laid out with numpy by bag.publications, zstd level -3 in '
+        "record: runner.run_scene to MCAP (per publication the drive's tuple and the profile "
+        "sample's bytes kept; at each flush the rows packed, the ledgers booked and a 768 KiB "
+        "chunk laid out by bag.publications' numba kernel, zstd level -3 in "
         "the writer's worker thread); CPU: "
         "the same two runs' main-thread CPU time (time.thread_time), physics / record: the "
         'ratio with a core free for the compression, whatever the load; per publication: the '
         'same messages with one write_records call per publication (the runner before '
         'columns); rclpy record: the same topics built as rclpy messages and serialised by '
-        'rclpy (the runner before bag.cdr); without writing: run_scene with the collected rows '
-        "dropped at each flush (the collection per publication with the model's profile sample "
-        'and a copy of the state for the ledger, file open and close: the bound on the ratio '
-        'however fast the ledger, the layout and the chunks get); summary: analysis.summarize '
+        'rclpy (the runner before bag.cdr); without writing: run_scene with the collected '
+        'publications dropped at each flush (the collection per publication with the profile '
+        'sample and a copy of the state for the ledger, file open and close: the bound on the '
+        'ratio however fast the flush gets); without ledgers: record with no energy ledger '
+        'booked (no ledger messages: what the 5 Hz ledgers cost); summary: analysis.summarize '
         'reading the file back (printed by `pulsejet run` after the timed run, not in the '
         'ratio). Ratio = physics / record '
         f'(target >= {TARGET_RATIO}).\n\n'
         '| scene | physics | record | ratio | CPU ratio | per publication | ratio | rclpy record '
-        '| ratio | without writing | ratio | summary | MCAP size |\n'
-        '|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+        '| ratio | without ledgers | ratio | without writing | ratio | summary | MCAP size |\n'
+        '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
     )
 
     def cell(seconds):
@@ -317,6 +344,7 @@ def main(argv=None) -> int:
             f'| {name} | {cell(med["physics"])} | {cell(med["record"])} | {ratio:.2f} | '
             f'{cpu_ratio:.2f} | {cell(med["per_pub"])} | '
             f'{med["physics"] / med["per_pub"]:.2f} | {rclpy_cells} | '
+            f'{cell(med["no_ledgers"])} | {med["physics"] / med["no_ledgers"]:.2f} | '
             f'{cell(med["no_writing"])} | {med["physics"] / med["no_writing"]:.2f} | '
             f'{med["summary"]:.3f} s | {size / 1e6:.2f} MB |\n'
         )

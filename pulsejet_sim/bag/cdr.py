@@ -196,7 +196,7 @@ class TopicEncoder:
         self._clock = struct.Struct('<iI')
         self._types = dict(TOPIC_TYPES)
         self._ledger_head: bytes | None = None  # the ledger up to its status' level, stamp 0
-        self._ledger_keys: dict[str, bytes] = {}  # a ledger key as a CDR string
+        self._ledger_keys: dict[tuple, list[str]] = {}  # ledger keys -> padded strings
 
     def type_of(self, topic: str) -> str:
         """Return the ROS type name of a pulsejet topic (interface.TOPIC_TYPES)."""
@@ -311,21 +311,35 @@ class TopicEncoder:
         buf += _LEDGER_HARDWARE_ID
         buf += _PADS[-len(buf) % 4]
         buf += _UINT32.pack(len(ledger))
-        # the KeyValue strings inline (the ledger is the only long message built per sample)
-        keys, pack = self._ledger_keys, _UINT32.pack
-        for key, value in ledger.items():
-            text = keys.get(key)
-            if text is None:
-                data = str(key).encode('utf-8')
-                text = keys[key] = pack(len(data) + 1) + data + b'\x00'
-            buf += _PADS[-len(buf) % 4]
-            buf += text
-            data = repr(float(value)).encode()
-            buf += _PADS[-len(buf) % 4]
-            buf += pack(len(data) + 1)
-            buf += data
-            buf += b'\x00'
-        return bytes(buf)
+        if not ledger:
+            return bytes(buf)
+        # the KeyValues as latin-1 text, one str operation each (the ledger is the only long
+        # message built per sample): every CDR string starts 4-aligned, so a key or a value is
+        # its CDR string padded to 4 bytes whatever came before; the last value is not padded
+        keys = self._ledger_keys.get(tuple(ledger))
+        if keys is None:
+            keys = self._ledger_keys[tuple(ledger)] = [_padded_string(k) for k in ledger]
+        # the repr of a list of floats is its items' repr(float) joined by ', ': one call
+        values = repr(list(map(float, ledger.values())))[1:-1].split(', ')
+        frames = _VALUE_FRAMES
+        text = ''.join([key + frames[len(value)] % value for key, value in zip(keys, values)])
+        return bytes(buf) + text.encode('latin-1')[:len(text) - (-(5 + len(values[-1])) % 4)]
+
+
+def _padded_string(text: str) -> str:
+    """Return a CDR string (uint32 length with the NUL, UTF-8, NUL) padded to 4, as latin-1."""
+    data = _string(str(text))
+    return (data + _PADS[-len(data) % 4]).decode('latin-1')
+
+
+# a value's text of n characters (n < 64; a float's repr has at most 24) -> '%s' framed as a
+# padded CDR string, as latin-1: its uint32 length, the text, the NUL and the padding to 4 bytes
+# (a '%' byte of the length escaped)
+_VALUE_FRAMES = [
+    (_UINT32.pack(n + 1).decode('latin-1').replace('%', '%%') + '%s'
+     + '\x00' * (1 + (-(5 + n) % 4)))
+    for n in range(64)
+]
 
 
 class ColumnEncoder:
@@ -464,8 +478,9 @@ def _stamped(template: bytes, ns: np.ndarray) -> np.ndarray:
 def stamps_ns(times_s: np.ndarray) -> np.ndarray:
     """Return stamp_ns of each time (the same rounding), as int64; ValueError names a bad one."""
     t = np.asarray(times_s, dtype=np.float64)
-    bad = ~(np.isfinite(t) & (t >= 0.0) & (t < _MAX_STAMP_S))
-    if bad.any():
+    # min and max: a NaN makes both comparisons false (the element-wise check finds it)
+    if t.size and not (t.min() >= 0.0 and t.max() < _MAX_STAMP_S):
+        bad = ~(np.isfinite(t) & (t >= 0.0) & (t < _MAX_STAMP_S))
         stamp_ns(float(t[np.flatnonzero(bad)[0]]))  # raises with the value
     # Python's round() of a float and np.rint both round half to even, on the same product
     return np.rint(t * 1e9).astype(np.int64)

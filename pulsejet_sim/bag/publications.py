@@ -1,5 +1,5 @@
 """
-A run's publications as MCAP Message records, laid out with numpy a stretch at a time.
+A run's publications as MCAP Message records, laid out a stretch at a time.
 
 The offline runner publishes the same messages at every publication period, in sim_node's order:
 each actuator's command (std_msgs/Float64), the applied command when it changed
@@ -7,10 +7,11 @@ each actuator's command (std_msgs/Float64), the applied command when it changed
 profile and, every LEDGER_PERIOD_S, the energy ledger. Every one of them but the ledger has one
 size for a whole run (fixed frame ids, names and point counts), so the records of a stretch of
 publications are copies of one template with the varying fields (sequence, log and publish time,
-header stamp, values) written over them: one numpy assignment per field for the whole stretch,
-no Python object per message. A record is the MCAP Message record (opcode 5, length, channel,
-sequence, log time, publish time = log time) followed by the bytes bag.cdr.TopicEncoder writes for
-the same message (test_recording compares them message by message).
+header stamp, values) written over them, for the whole stretch in one call of a numba kernel
+(bag.publication_kernel), no Python object per message. A record is the MCAP Message record
+(opcode 5, length, channel, sequence, log time, publish time = log time) followed by the bytes
+bag.cdr.TopicEncoder writes for the same message (test_recording compares them message by
+message).
 
 PublicationLayout.records returns the records of a stretch with each channel's message index;
 BagWriter.write_chunk writes them as one MCAP chunk.
@@ -53,8 +54,6 @@ STATE_ORDER = (
 # MCAP Message record head: opcode u8, record length u64 (what follows it), channel u16,
 # sequence u32, log time u64, publish time u64; the message bytes follow
 _HEAD = struct.Struct('<BQHIQQ')
-_SEQUENCE = 11
-_HEAD_TAIL = np.dtype([('sequence', '<u4'), ('log_time', '<u8'), ('publish_time', '<u8')])
 # in a message: the Header (or Clock) stamp, int32 s then uint32 ns, after the encapsulation
 _STAMP = 4
 
@@ -64,11 +63,11 @@ class Stretch:
     """
     The records of a stretch of publications, ready for BagWriter.write_chunk.
 
-    records: the Message records back to back, as a list of buffers (bytes or uint8 arrays;
-    the file holds them joined) of size bytes in all; index: (channel id, (k, 2) uint64 array of
-    log time and offset in records) per channel, in order of first appearance; first_ns, last_ns:
-    the smallest and largest log time; counts: each channel's message count after it (the
-    layout's counts to continue from once the stretch is written).
+    records: the Message records back to back, as a list of bytes-like objects (bytes,
+    memoryviews; the file holds them joined) of size bytes in all; index: (channel id, (k, 2)
+    uint64 array of log time and offset in records) per channel, in order of first appearance;
+    first_ns, last_ns: the smallest and largest log time; counts: each channel's message count
+    after it (the layout's counts to continue from once the stretch is written).
     """
 
     records: list
@@ -92,17 +91,6 @@ class _Part:
             template += _HEAD.pack(5, _HEAD.size - 9 + len(data), channels[topic], 0, 0, 0) + data
         self.template = np.frombuffer(template, dtype=np.uint8)
         self.width = len(template)
-
-    def rows(self, n: int) -> np.ndarray:
-        rows = np.empty((n, self.width), dtype=np.uint8)
-        rows[:] = self.template
-        return rows
-
-
-def _bytes(column: np.ndarray, dtype: str) -> np.ndarray:
-    """Return a column of n values (or an (n, k) block) as an (n, bytes) uint8 array."""
-    column = np.ascontiguousarray(column, dtype=dtype)
-    return column.view(np.uint8).reshape(len(column), -1)
 
 
 class PublicationLayout:
@@ -161,7 +149,14 @@ class PublicationLayout:
             self.profile_at = self.state.width - 12 * profile_points
         self.state_stamps = [at[topic] + body + _STAMP for topic in stamped]
         self.ledger_channel = channels[TOPIC_ENERGY_LEDGER]
-        self.template = np.concatenate([self.command.template, self.state.template])
+        # the kernel's arguments (publication_kernel.lay_out), as arrays
+        self._c_starts = np.array(self.command.starts, dtype=np.int64)
+        self._c_columns = np.array(self.command_columns, dtype=np.int64)
+        self._s_starts = np.array(self.state.starts, dtype=np.int64)
+        self._stamp_ats = np.array(self.state_stamps, dtype=np.int64)
+        self._value_ats = np.array([at for at, _ in self.state_values], dtype=np.int64)
+        self._value_columns = np.array([c for _, c in self.state_values], dtype=np.int64)
+        self._profile_at = self.profile_at if profile_points is not None else 0
         self.counts = dict.fromkeys(channels.values(), 0)
 
     def records(
@@ -184,116 +179,65 @@ class PublicationLayout:
         profiles: (r_m, z_m), each (n, profile_points), or None without a profile topic;
         ledgers: publication row -> the energy ledger's CDR bytes (TopicEncoder.ledger).
         """
+        from pulsejet_sim.bag.publication_kernel import lay_out
+
         n = len(state_ns)
         commanded = command_ns >= 0
         applied = applied & commanded
         counts = dict(self.counts)  # committed by the caller (a stretch may be laid out twice)
         c_part, a_part, s_part = self.command, self.applied, self.state
-        wc, wa, ws = c_part.width, a_part.width, s_part.width
-        # -- a row per publication: its commands then its state (a row without commands uses
-        # only the state's columns)
-        rows = np.empty((n, wc + ws), dtype=np.uint8)
-        rows[:] = self.template
-        c_ns = command_ns[commanded]
-        c_seq = np.cumsum(commanded, dtype=np.int64)
-        for start, channel, heads in _heads(c_part, counts, c_seq, command_ns):
-            rows[:, start + _SEQUENCE:start + _HEAD.size] = heads
-        for start, column in zip(c_part.starts, self.command_columns):
-            rows[:, start + _HEAD.size + 4:start + _HEAD.size + 12] = _bytes(
-                commands[:, column], '<f8'
-            )
-        s_seq = np.arange(1, n + 1, dtype=np.int64)
-        for start, channel, heads in _heads(s_part, counts, s_seq, state_ns):
-            rows[:, wc + start + _SEQUENCE:wc + start + _HEAD.size] = heads
-        stamps = _stamps(state_ns)
-        for at in self.state_stamps:
-            rows[:, wc + at:wc + at + 8] = stamps
-        for at, column in self.state_values:
-            rows[:, wc + at:wc + at + 8] = _bytes(states[:, column], '<f8')
-        if self.profile_points is not None:
-            r_m, z_m = profiles
-            points = np.zeros((n, self.profile_points, 3), dtype='<f4')
-            points[:, :, 0] = z_m  # Point32 x = axial position, y = radius (TopicEncoder.profile)
-            points[:, :, 1] = r_m
-            rows[:, wc + self.profile_at:] = points.reshape(n, -1).view(np.uint8)
-        # -- the applied command, only where published
-        a_rows = a_part.rows(int(applied.sum()))
-        if len(a_rows):
-            a_ns = command_ns[applied]
-            for start, channel, heads in _heads(
-                a_part, counts, np.arange(1, len(a_ns) + 1), a_ns
-            ):
-                a_rows[:, _SEQUENCE:_HEAD.size] = heads
-            a_rows[:, _HEAD.size + _STAMP:_HEAD.size + _STAMP + 8] = _stamps(a_ns)
-            at = self.applied_positions
-            a_rows[:, at:at + 24] = _bytes(commands[applied], '<f8')
-        # -- the energy ledgers, one record each
+        n_commanded, n_applied = int(commanded.sum()), int(applied.sum())
+        # the ledgers' bytes back to back, publication row's between bounds[row] and [row + 1]
         ledger_rows = sorted(ledgers)
-        ledger_records = {}
+        sizes = np.zeros(n + 1, dtype=np.int64)
+        sizes[1:][ledger_rows] = [len(ledgers[row]) for row in ledger_rows]
+        bounds = np.cumsum(sizes)
+        ledger_data = np.frombuffer(b''.join(ledgers[row] for row in ledger_rows), np.uint8)
+        out = np.empty(
+            n_commanded * c_part.width + n_applied * a_part.width + n * s_part.width
+            + _HEAD.size * len(ledger_rows) + len(ledger_data), dtype=np.uint8,
+        )
+        index_c = np.empty((len(c_part.starts), n_commanded, 2), dtype='<u8')
+        index_a = np.empty((n_applied, 2), dtype='<u8')
+        index_s = np.empty((len(s_part.starts), n, 2), dtype='<u8')
+        index_l = np.empty((len(ledger_rows), 2), dtype='<u8')
+        if self.profile_points is not None:
+            r_m, z_m = (np.ascontiguousarray(p, dtype=np.float64) for p in profiles)
+        else:
+            r_m = z_m = np.zeros((n, 0))
         channel = self.ledger_channel
-        for row in ledger_rows:
-            data = ledgers[row]
-            counts[channel] += 1
-            ns = int(state_ns[row])
-            ledger_records[row] = (
-                _HEAD.pack(5, _HEAD.size - 9 + len(data), channel, counts[channel], ns, ns) + data
-            )
-        # -- publication p: [commands] [applied] state [ledger], back to back: the rows of plain
-        # publications (commands, no applied command, no ledger) are copied a stretch at a time
-        special = ~commanded | applied
-        special[ledger_rows] = True
-        pieces, done = [], 0
-        a_at = np.cumsum(applied) - 1  # each publication's row in a_rows
-        for row in np.flatnonzero(special).tolist():
-            if row > done:
-                pieces.append(rows[done:row].reshape(-1))
-            if not commanded[row]:
-                pieces.append(rows[row, wc:])
-            elif applied[row]:
-                pieces += [rows[row, :wc], a_rows[a_at[row]], rows[row, wc:]]
-            else:
-                pieces.append(rows[row])
-            if row in ledger_records:
-                pieces.append(ledger_records[row])
-            done = row + 1
-        if done < n:
-            pieces.append(rows[done:].reshape(-1))
-        size = sum(len(piece) if isinstance(piece, bytes) else piece.nbytes for piece in pieces)
+        size, *_ = lay_out(
+            out, c_part.template, self._c_starts, self._c_columns,
+            np.array([counts[c] for c in c_part.channels], dtype=np.int64),
+            a_part.template, self.applied_positions, counts[a_part.channels[0]],
+            s_part.template, self._s_starts,
+            np.array([counts[c] for c in s_part.channels], dtype=np.int64),
+            self._stamp_ats, self._value_ats, self._value_columns, self._profile_at,
+            commanded, applied, np.ascontiguousarray(command_ns, dtype=np.int64),
+            np.ascontiguousarray(commands, dtype=np.float64),
+            np.ascontiguousarray(state_ns, dtype=np.int64),
+            np.ascontiguousarray(states, dtype=np.float64), r_m, z_m,
+            ledger_data, bounds, channel, counts[channel],
+            index_c, index_a, index_s, index_l,
+        )
+        assert size == len(out)
         # -- message indexes (log time, offset), channels in order of first appearance
-        sizes = commanded * wc + applied * wa + ws
-        if ledger_rows:
-            sizes[ledger_rows] += [len(ledger_records[row]) for row in ledger_rows]
-        ends = np.cumsum(sizes)
-        starts = ends - sizes
         index = []
-        c_starts = starts[commanded]
-        if len(c_starts):
-            tables = np.empty((len(c_part.starts), len(c_starts), 2), dtype='<u8')
-            tables[:, :, 0] = c_ns
-            tables[:, :, 1] = c_starts + np.array(c_part.starts)[:, None]
-            index += [(int(t[0, 1]), c, t) for c, t in zip(c_part.channels, tables)]
-            counts.update((c, counts[c] + len(c_starts)) for c in c_part.channels)
-        if len(a_rows):
-            table = np.stack([command_ns[applied], starts[applied] + wc], axis=1).astype('<u8')
-            index.append((int(table[0, 1]), a_part.channels[0], table))
-            counts[a_part.channels[0]] += len(table)
-        tables = np.empty((len(s_part.starts), n, 2), dtype='<u8')
-        tables[:, :, 0] = state_ns
-        s_base = starts + commanded * wc + applied * wa
-        tables[:, :, 1] = s_base + np.array(s_part.starts)[:, None]
-        index += [(int(t[0, 1]), c, t) for c, t in zip(s_part.channels, tables)]
-        counts.update((c, counts[c] + n) for c in s_part.channels)
+        if n_commanded:
+            index += [(int(t[0, 1]), c, t) for c, t in zip(c_part.channels, index_c)]
+        if n_applied:
+            index.append((int(index_a[0, 1]), a_part.channels[0], index_a))
+        index += [(int(t[0, 1]), c, t) for c, t in zip(s_part.channels, index_s)]
         if ledger_rows:
-            table = np.empty((len(ledger_rows), 2), dtype='<u8')
-            table[:, 0] = state_ns[ledger_rows]
-            table[:, 1] = ends[ledger_rows] - [len(ledger_records[r]) for r in ledger_rows]
-            index.append((int(table[0, 1]), channel, table))
+            index.append((int(index_l[0, 1]), channel, index_l))
         index.sort(key=lambda entry: entry[0])
+        for _, c, t in index:
+            counts[c] += len(t)
         times = [int(state_ns[0]), int(state_ns[-1])]
-        if len(c_ns):
-            times += [int(c_ns[0]), int(c_ns[-1])]
+        if n_commanded:
+            times += [int(index_c[0, 0, 0]), int(index_c[0, -1, 0])]
         return Stretch(
-            records=pieces,
+            records=[out],
             size=size,
             index=[(channel, table) for _, channel, table in index],
             first_ns=min(times),
@@ -302,28 +246,24 @@ class PublicationLayout:
         )
 
 
-def _heads(part: _Part, counts: Mapping[int, int], sequence: np.ndarray, log_ns: np.ndarray):
+def warm_kernel() -> None:
     """
-    Yield (record start, channel, (n, 20) bytes of sequence, log and publish time) per record.
+    Compile (or load from numba's cache) the recording's kernels, with a run's argument types.
 
-    sequence: 1, 2, ... counting the part's messages; each channel's count is added (one block
-    for the channels whose counts agree, as a part's always do when only it writes them).
+    publication_kernel's lay_out and stamps_and_changes. `make venv` calls it, so the first
+    `pulsejet run` does not compile them.
     """
-    block = np.empty(len(log_ns), dtype=_HEAD_TAIL)
-    block['log_time'] = log_ns
-    block['publish_time'] = log_ns
-    done = None
-    for start, channel in zip(part.starts, part.channels):
-        if done != counts[channel]:
-            done = counts[channel]
-            block['sequence'] = done + sequence
-            heads = block.view(np.uint8).reshape(len(log_ns), _HEAD_TAIL.itemsize)
-        yield start, channel, heads
+    from pulsejet_sim.bag.cdr import RECORDED_TOPICS
+    from pulsejet_sim.bag.publication_kernel import stamps_and_changes
 
+    # the runner's rows: read-only doubles (np.frombuffer of the packed publications)
+    columns = 2 + len(APPLIED_COMMAND_NAMES) + len(STATE_FIELDS)
+    rows = np.frombuffer(np.zeros((2, columns)).tobytes()).reshape(2, columns)
+    stamps_and_changes(rows, 1 + len(APPLIED_COMMAND_NAMES), np.zeros(3), False)
 
-def _stamps(ns: np.ndarray) -> np.ndarray:
-    """builtin_interfaces/Time of each stamp in ns: int32 s, uint32 ns, as (n, 8) uint8."""
-    both = np.empty((len(ns), 2), dtype='<i4')
-    both[:, 0] = ns // 1_000_000_000
-    both[:, 1] = ns % 1_000_000_000  # below 2^31: the same bytes as uint32
-    return both.view(np.uint8).reshape(len(ns), 8)
+    layout = PublicationLayout({topic: i for i, topic in enumerate(RECORDED_TOPICS)}, 3)
+    layout.records(
+        np.array([-1, 0]), np.zeros((2, len(APPLIED_COMMAND_NAMES))), np.ones(2, dtype=bool),
+        np.array([0, 10]), np.zeros((2, len(STATE_FIELDS))), (np.zeros((2, 3)), np.zeros((2, 3))),
+        {1: layout.encoder.ledger({'in_initial': 1.0}, 10)},
+    )

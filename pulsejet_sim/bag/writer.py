@@ -20,10 +20,10 @@ refuses a recording of a newer format with a clear message (bag.reader.FORMAT_VE
 
 Topic names are stored fully qualified like rosbag2 ('pulsejet/velocity' -> '/pulsejet/velocity').
 
-Two ways in: write() per message (the ROS recorder, with rclpy's bytes; ros.bag_messages for
-rclpy message objects), and
-write_records() for batches of bag.cdr bytes (the offline tools, no rclpy), which writes the same
-file faster.
+Three ways in: write() per message (the ROS recorder, with rclpy's bytes; ros.bag_messages for
+rclpy message objects); write_records() for the messages of one publication as bag.cdr bytes
+(resim, no rclpy), which writes the same file faster; write_chunk() for a stretch of Message
+records laid out by the caller (the offline runner: bag.publications), one MCAP chunk each.
 """
 
 from __future__ import annotations
@@ -48,7 +48,6 @@ from mcap.records import ChunkIndex, MessageIndex
 from mcap.writer import CompressionType, Writer
 import numpy as np
 from pulsejet_sim.bag import msgdefs
-from pulsejet_sim.bag.batch import Merged, RecordBatch
 from pulsejet_sim.bag.records import FORMAT_VERSION
 from pulsejet_sim.core.schema import load_own_yaml
 import yaml
@@ -362,69 +361,6 @@ class BagWriter:
             if self._flush_due(now):
                 self._flush_locked()
 
-    def write_batch(self, batch: RecordBatch) -> None:
-        """
-        Append a RecordBatch (bag.batch): messages of pulsejet topics in order of their keys.
-
-        The file is byte for byte the one write_records per publication gives (test_recording);
-        with the pinned mcap library the records are laid out with numpy, a stretch of a run at a
-        time, without a Python object per message.
-        """
-        merged = batch.merged()
-        count = len(merged.log_ns)
-        if count == 0:
-            return
-        if merged.log_ns.min() < 0:
-            bad = int(merged.log_ns[np.argmin(merged.log_ns)])
-            raise BagError(f'log_time_ns={bad!r} rejected; allowed: an integer >= 0 (ns)')
-        with self._mutating():
-            topics = [block.topic for block in merged.blocks]
-            start = 0
-            while start < count:
-                # a topic first seen here is added where write_records would add it: its schema
-                # and channel records go into the chunk just before its first message
-                routes = [self._route.get(topic) for topic in topics]
-                new = [b for b, route in enumerate(routes) if route is None]
-                stop = count
-                if new:
-                    firsts = np.flatnonzero(np.isin(merged.block_of[start:], new))
-                    stop = start + int(firsts[0]) if len(firsts) else count
-                if stop == start:
-                    self._route_of(topics[merged.block_of[start]])
-                    continue
-                part = slice(start, stop)
-                channel_of = np.array(
-                    [route[0] if route else 0 for route in routes], dtype=np.uint16
-                )
-                channels = channel_of[merged.block_of[part]]
-                sequences = np.empty(stop - start, dtype=np.uint32)
-                for b in np.unique(merged.block_of[part]):
-                    sel = merged.block_of[part] == b
-                    name = routes[b][1]
-                    sequences[sel] = self._counts[name] + np.arange(1, sel.sum() + 1)
-                    self._counts[name] += int(sel.sum())
-                if self._fast is not None:
-                    self._fast.add_batch(merged, part, channels, sequences)
-                else:
-                    for i, channel, sequence in zip(
-                        range(start, stop), channels.tolist(), sequences.tolist()
-                    ):
-                        block = merged.blocks[merged.block_of[i]]
-                        data = bytes(block.rows[merged.row_of[i]])
-                        log_ns = int(merged.log_ns[i])
-                        self._writer.add_message(channel, log_ns, data, log_ns, sequence)
-                start = stop
-            first, last = int(merged.log_ns.min()), int(merged.log_ns.max())
-            self._first_ns = first if self._first_ns is None else min(self._first_ns, first)
-            self._last_ns = last if self._last_ns is None else max(self._last_ns, last)
-            now = time.monotonic()
-            if self._pending_since is None:
-                self._pending_since = now
-                if self._flusher is None:
-                    self._start_flusher()
-            if self._flush_due(now):
-                self._flush_locked()
-
     def channel_ids(self, topics: Sequence[str]) -> dict[str, int]:
         """
         Add the pulsejet topics (interface.TOPIC_TYPES types) in this order; return their channels.
@@ -708,10 +644,6 @@ class _Mutating:
 
 
 _MESSAGE_HEAD = struct.Struct('<BQHIQQ')  # MCAP Message record: opcode, length, fields
-_HEAD_DTYPE = np.dtype([  # the same head, packed, one per record of a batch
-    ('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'), ('sequence', '<u4'),
-    ('log_time', '<u8'), ('publish_time', '<u8'),
-])
 
 
 class _FastChunk:
@@ -821,67 +753,6 @@ class _FastChunk:
             elif i < n:
                 route_of(records[i][0])
 
-    def add_batch(
-        self, merged: Merged, part: slice, channels: np.ndarray, sequences: np.ndarray
-    ) -> None:
-        """
-        Append records part of a merged batch, with their channels and sequences.
-
-        The same bytes, index entries, statistics and chunk boundaries as add() per message: a
-        chunk closes after the first record that ends beyond chunk_size.
-        """
-        builder, stats, chunk_size = self.builder, self.stats, self.chunk_size
-        log_ns = merged.log_ns[part]
-        sizes = merged.sizes[part] + _MESSAGE_HEAD.size
-        _extend_statistics(stats, int(log_ns.min()), int(log_ns.max()), len(log_ns))
-        # in order of first appearance: the summary's Statistics record lists them that way
-        seen, firsts, counts = np.unique(channels, return_index=True, return_counts=True)
-        for k in np.argsort(firsts):
-            stats.channel_message_counts[int(seen[k])] += int(counts[k])
-        heads = np.empty(len(log_ns), dtype=_HEAD_DTYPE)
-        heads['opcode'] = 5
-        heads['length'] = sizes - 9  # the record's length field counts what follows it
-        heads['channel'] = channels
-        heads['sequence'] = sequences
-        heads['log_time'] = log_ns
-        heads['publish_time'] = log_ns
-        heads = heads.view(np.uint8).reshape(len(log_ns), _MESSAGE_HEAD.size)
-        i, n = 0, len(log_ns)
-        while i < n:
-            buffer = builder.record_writer._buffer  # a new one after each chunk closes
-            offset = buffer.tell()
-            ends = offset + np.cumsum(sizes[i:])
-            over = int(np.searchsorted(ends, chunk_size, side='right'))
-            m = min(over + 1, n - i)
-            starts = ends[:m] - sizes[i:i + m]
-            times = log_ns[i:i + m]
-            if builder.num_messages == 0:
-                builder.message_start_time = int(times.min())
-            else:
-                builder.message_start_time = min(builder.message_start_time, int(times.min()))
-            builder.message_end_time = max(builder.message_end_time, int(times.max()))
-            indices = builder.message_indices
-            chunk_channels = channels[i:i + m]
-            seen, firsts = np.unique(chunk_channels, return_index=True)
-            for channel in seen[np.argsort(firsts)].tolist():
-                index = indices.get(channel)
-                if index is None:
-                    index = indices[channel] = _MessageIndex(channel_id=channel, records=[])
-                sel = chunk_channels == channel
-                index.records.append(
-                    np.stack([times[sel], starts[sel]], axis=1).astype('<u8')
-                )
-            out = np.empty(int(ends[m - 1] - offset), dtype=np.uint8)
-            merged.scatter(
-                out, starts - offset, heads[i:i + m],
-                slice(part.start + i, part.start + i + m),
-            )
-            builder.num_messages += m
-            buffer.write(out.data)
-            i += m
-            if ends[m - 1] > chunk_size:
-                self.finalize()
-
     def write_chunk(self, stretch: 'Stretch', compression: str, level: int) -> tuple:
         """
         Start the chunk of a stretch: its data handed to the compression worker.
@@ -902,7 +773,9 @@ class _FastChunk:
             import zstandard
 
             self.compressor = zstandard.ZstdCompressor(level=level)
-        data = b''.join(pieces)  # here: the worker holding the GIL for the copy could stall us
+        # one piece (a laid-out stretch, no schema or channel record before it) is compressed as
+        # it is; several are joined here: the worker holding the GIL for the copy could stall us
+        data = memoryview(pieces[0]).cast('B') if len(pieces) == 1 else b''.join(pieces)
         job = _Job(lambda: _compress(data, compression, self.compressor))
         if _ChunkCompressor.in_thread:
             _ChunkCompressor.shared().submit(job)
@@ -925,15 +798,20 @@ class _FastChunk:
         stream.write(packed)
         chunk_length = len(head) + len(packed)
         index_start = chunk_start + chunk_length
-        offsets, parts, at = {}, [], index_start
+        # every channel's (log time, offset) entries in one array: one conversion, then a slice
+        # of its bytes per channel
+        entries = np.concatenate([table for _, table in stretch.index]).astype('<u8')
+        if shift:
+            entries[:, 1] += np.uint64(shift)
+        data = entries.tobytes()
+        offsets, parts, at, done = {}, [], index_start, 0
         for channel, table in stretch.index:
-            if shift:
-                table = table + np.array([0, shift], dtype='<u8')
-            body = table.astype('<u8', copy=False).tobytes()
-            parts.append(struct.pack('<BQHI', 7, 6 + len(body), channel, len(body)))
-            parts.append(body)
+            length = 16 * len(table)
+            parts.append(struct.pack('<BQHI', 7, 6 + length, channel, length))
+            parts.append(data[done:done + length])
+            done += length
             offsets[channel] = at
-            at += 15 + len(body)
+            at += 15 + length
         stream.write(b''.join(parts))
         self.chunk_indexes.append(ChunkIndex(
             message_start_time=stretch.first_ns,
@@ -1053,23 +931,12 @@ class _MessageIndex(MessageIndex):
     """
     mcap's MessageIndex record written in one pass (mcap writes 2 calls per entry).
 
-    records holds (log time, offset) tuples (write_records) or (k, 2) uint64 arrays of k entries
-    (write_batch), in record order.
+    records holds the (log time, offset) tuples of write_records, in record order.
     """
 
     def write(self, stream) -> None:
-        parts, flat = [], []
-        for entry in self.records:
-            if isinstance(entry, np.ndarray):
-                if flat:
-                    parts.append(struct.pack(f'<{len(flat)}Q', *flat))
-                    flat = []
-                parts.append(entry.tobytes())
-            else:
-                flat.extend(entry)
-        if flat:
-            parts.append(struct.pack(f'<{len(flat)}Q', *flat))
-        body = b''.join(parts)
+        flat = [value for entry in self.records for value in entry]
+        body = struct.pack(f'<{len(flat)}Q', *flat)
         stream.write(struct.pack('<BQHI', 7, 6 + len(body), self.channel_id, len(body)) + body)
 
 

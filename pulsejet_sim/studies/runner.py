@@ -145,17 +145,19 @@ def _record(drive: Drive, out: Path) -> RunResult:
 
 class _RunColumns:
     """
-    The run's publications as columns, written a chunk at a time (bag.publications).
+    The run's publications, written a chunk at a time (bag.publications).
 
-    Per publication the command, the state values and the model's profile sample go into a row
-    of preallocated arrays (every LEDGER_PERIOD_S a copy of the state too, for its energy
-    ledger); the row counts only once it is complete (one store, so a signal handler that closes
-    the writer mid-run hands over whole publications). flush() books the ledgers, lays out the
-    records of every row with numpy (PublicationLayout.records) and writes them as one MCAP chunk
-    (BagWriter.write_chunk).
+    Per publication only references and one copy: the (start, command, observation) the drive
+    yields, appended to a list (the publication counts from that one store on, so a signal
+    handler that closes the writer mid-run hands over whole publications), the bytes of the
+    model's profile sample (the state changes in place) and, every LEDGER_PERIOD_S, a copy of
+    the state for its energy ledger. flush() turns a chunk's publications into columns, books
+    their ledgers, lays out their records with numpy (PublicationLayout.records) and writes them
+    as one MCAP chunk (BagWriter.write_chunk). Between physics steps a publication costs two
+    appends and a copy; packing its values into rows is done a chunk at a time.
     """
 
-    #: rows per chunk; None: as many as fill the writer's chunk size
+    #: publications per chunk; None: as many as fill the writer's chunk size
     PUBLICATIONS_PER_CHUNK: int | None = None
 
     def __init__(self, writer, sim: Simulation) -> None:
@@ -192,40 +194,45 @@ class _RunColumns:
             self.encoder,
         )
         per_publication = self.layout.command.width + self.layout.state.width
-        capacity = self.PUBLICATIONS_PER_CHUNK or max(
+        self.capacity = self.PUBLICATIONS_PER_CHUNK or max(
             1, writer.chunk_size_bytes // per_publication
         )
-        self.capacity = capacity
-        self.command_values = operator.attrgetter(*APPLIED_COMMAND_NAMES)
-        self.no_command = (0.0,) * len(APPLIED_COMMAND_NAMES)
-        self.command_columns = slice(1, 1 + len(APPLIED_COMMAND_NAMES))
-        self.state_values = operator.attrgetter('time_s', *STATE_FIELDS)
+        command_values = operator.attrgetter(*APPLIED_COMMAND_NAMES)
+        no_command = (0.0,) * len(APPLIED_COMMAND_NAMES)
+        state_values = operator.attrgetter('time_s', *STATE_FIELDS)
         # a row per publication: the commands' time (-1: none), the command values in
         # APPLIED_COMMAND_NAMES' order, the state's time and STATE_FIELDS
-        self.rows = np.empty((capacity, 1 + len(APPLIED_COMMAND_NAMES) + 1 + len(STATE_FIELDS)))
-        self.row = struct.Struct(f'={self.rows.shape[1]}d')  # native doubles, as the array's
-        self.samples = (
-            None if self.sample is None
-            else np.empty((capacity, len(self.sample(sim.state))))
+        row = struct.Struct(f'={2 + len(APPLIED_COMMAND_NAMES) + len(STATE_FIELDS)}d').pack
+
+        def rows(publications) -> np.ndarray:
+            data = b''.join([
+                row(start_s, *(command_values(command) if command is not None else no_command),
+                    *state_values(obs))
+                for start_s, command, obs in publications
+            ])
+            return np.frombuffer(data).reshape(len(publications), -1)
+
+        self.rows = rows
+        self.command_columns = slice(1, 1 + len(APPLIED_COMMAND_NAMES))
+        self.sample_values = (
+            None if self.sample is None else len(self.sample(sim.state))
         )
-        # row -> the state whose energy ledger that publication carries, booked at flush():
-        # the ledger is a function of the state alone (Simulation.energy_ledger), and computing
-        # a stretch's ledgers back to back costs about half of doing it between physics steps
+        self.publications: list[tuple[float, Command | None, Observation]] = []
+        self.samples: list[bytes] = []  # each publication's profile sample, its bytes
+        # publication -> the state whose energy ledger it carries, booked at flush(): the
+        # ledger is a function of the state alone (Simulation.energy_ledger), and computing a
+        # stretch's ledgers back to back costs about half of doing it between physics steps
         self.ledgers: dict[int, np.ndarray] = {}
         self.last_command: np.ndarray | None = None
-        self.n = 0
         self.period_s = 0.5 * writer.flush_period_s
         self.since = time.monotonic()
 
     def add(self, command: Command | None, obs: Observation, start_s: float = -1.0) -> None:
         """Add a publication, its ledger: the command sent at start_s (None: none), the state."""
-        i = self.n
-        values = self.command_values(command) if command is not None else self.no_command
-        self.rows[i] = (start_s, *values, *self.state_values(obs))
-        if self.samples is not None:
-            self.samples[i] = self.sample(self.sim.state)
-        self.ledgers[i] = self.sim.state.copy()
-        self.n = i + 1
+        if self.sample is not None:
+            self.samples.append(self.sample(self.sim.state).tobytes())
+        self.ledgers[len(self.publications)] = self.sim.state.copy()
+        self.publications.append((start_s, command, obs))
         self.flush_if_due()
 
     def record(self, drive: Drive, ledger_every: int) -> int:
@@ -235,71 +242,85 @@ class _RunColumns:
         Returns how many it yielded. The loop of add() with its lookups hoisted: it runs once
         per publication, next to the physics it records.
         """
-        rows, samples, sample, sim = self.rows, self.samples, self.sample, self.sim
-        # a row packed in place (struct: about half numpy's cost of a row from a tuple)
-        row_into, row_bytes = self.row.pack_into, self.row.size
-        command_values, state_values = self.command_values, self.state_values
+        import numpy as np
+
+        publications, samples, sim, sample = self.publications, self.samples, self.sim, self.sample
+        append, add_sample = publications.append, samples.append
+        # the profile sample: a view of the state (the physics changes it in place) whose bytes
+        # are taken per publication, or the model's sample of each state
+        state = sim.state
+        view = None if sample is None else sample(state)
+        if view is not None and not np.shares_memory(view, state):
+            view = None
         capacity, monotonic, last = self.capacity, time.monotonic, drive.batches
         period_s = self.period_s
         # a chunk handed over this many publications before the end: its compression (in the
         # writer's worker) overlaps the last ones, and close() compresses only a short tail
         tail = last - max(1, capacity // 3)
         published = 0
-        for start_s, command, obs in drive:
+        for publication in drive:
             published += 1
-            i = self.n
-            row_into(rows, i * row_bytes, start_s, *command_values(command), *state_values(obs))
-            if samples is not None:
-                samples[i] = sample(sim.state)
+            if view is not None and sim.state is state:
+                add_sample(view.tobytes())
+            elif sample is not None:  # not a view, or reset() replaced the state
+                add_sample(sample(sim.state).tobytes())
             if published % ledger_every == 0 or published == last:
-                self.ledgers[i] = sim.state.copy()
-            self.n = i + 1  # the publication counts from here on (a signal's flush takes it)
-            if i + 1 == capacity or published == tail or monotonic() - self.since >= period_s:
+                self.ledgers[len(publications)] = sim.state.copy()
+            append(publication)  # the publication counts from here on (a signal's flush takes it)
+            if (len(publications) == capacity or published == tail
+                    or monotonic() - self.since >= period_s):
                 self.flush()
         return published
 
     def flush_if_due(self) -> None:
-        if self.n == self.capacity or time.monotonic() - self.since >= self.period_s:
+        if (len(self.publications) >= self.capacity
+                or time.monotonic() - self.since >= self.period_s):
             self.flush()
 
     def flush(self) -> None:
-        """Lay out the rows added since the last flush and write them as one chunk."""
+        """Lay out the publications added since the last flush and write them as one chunk."""
         from pulsejet_sim.bag.cdr import stamps_ns
+        from pulsejet_sim.bag.publication_kernel import stamps_and_changes
         import numpy as np
 
-        n = self.n
+        n = len(self.publications)
         if not n:
             return
-        rows = self.rows[:n]
-        commanded = rows[:, 0] >= 0.0
-        command_ns = np.full(n, -1, dtype=np.int64)
-        command_ns[commanded] = stamps_ns(rows[commanded, 0])
-        commands = rows[:, self.command_columns]
-        applied = np.zeros(n, dtype=bool)
-        sent = commands[commanded]
+        rows = self.rows(self.publications[:n])
+        stop = self.command_columns.stop  # the state's time
+        sent, times = rows[:, 0], rows[:, stop]
+        if not (sent.max() < 2.0**31 and times.min() >= 0.0 and times.max() < 2.0**31):
+            stamps_ns(times)  # ValueError naming a time that is no ROS stamp (or a NaN)
+            stamps_ns(sent[sent >= 0.0])
+        # the stamps, and the applied command published when the held command changes (sim_node)
         last = self.last_command
-        if len(sent):
-            # the applied command is published when the held command changes (sim_node)
-            before = np.empty_like(sent)
-            before[1:] = sent[:-1]
-            if last is not None:
-                before[0] = last
-            changed = np.any(sent != before, axis=1)
-            if last is None:
-                changed[0] = True
-            applied[commanded] = changed
-            last = sent[-1].copy()
-        states = rows[:, self.command_columns.stop:]
-        state_ns = stamps_ns(states[:, 0])
-        ledger, energy_ledger = self.encoder.ledger, self.sim.model.energy_ledger
-        stretch = self.layout.records(
-            command_ns, commands, applied, state_ns, states[:, 1:],
-            None if self.samples is None else self.profiles_of(self.samples[:n]),
-            {row: ledger(energy_ledger(state), int(state_ns[row]))
-             for row, state in self.ledgers.items() if row < n},
+        command_ns, state_ns, applied, held, has_held = stamps_and_changes(
+            rows, stop, np.zeros(stop - 1) if last is None else last, last is not None
         )
-        # the rows are in the stretch: a signal closing the file from here on finds none left
-        self.n = 0
+        last = held if has_held else None
+        commands = rows[:, self.command_columns]
+        states = rows[:, stop:]
+        profiles = None
+        if self.sample is not None:
+            samples = np.frombuffer(b''.join(self.samples[:n])).reshape(n, self.sample_values)
+            profiles = self.profiles_of(samples)
+        booked = sorted(row for row in self.ledgers if row < n)
+        model = self.sim.model
+        if not booked:
+            values = []
+        elif hasattr(model, 'energy_ledgers'):  # the model books them at once (the shell)
+            values = model.energy_ledgers(np.array([self.ledgers[row] for row in booked]))
+        else:
+            values = [model.energy_ledger(self.ledgers[row]) for row in booked]
+        ledger = self.encoder.ledger
+        stretch = self.layout.records(
+            command_ns, commands, applied, state_ns, states[:, 1:], profiles,
+            {row: ledger(value, int(state_ns[row])) for row, value in zip(booked, values)},
+        )
+        # the publications are in the stretch: a signal closing the file from here on finds
+        # none left (a sample or ledger of a publication not yet appended goes with it)
+        del self.publications[:n]
+        del self.samples[:]
         self.layout.counts = stretch.counts
         self.ledgers, self.last_command = {}, last
         self.since = time.monotonic()
