@@ -76,6 +76,20 @@ def closed_loop_run(domain, load: bool, tmp_path):
             p.join(5)
 
 
+def differences(idle: dict, loaded: dict) -> str:
+    """List the entries that differ between two runs, by topic and stamp (ns)."""
+    lines = []
+    for topic in sorted(set(idle) | set(loaded)):
+        a, b = idle.get(topic, {}), loaded.get(topic, {})
+        for stamp in sorted(set(a) | set(b)):
+            if a.get(stamp, 'missing') != b.get(stamp, 'missing'):
+                lines.append(
+                    f'{topic} at {stamp} ns: idle {a.get(stamp, "missing")!r}, '
+                    f'loaded {b.get(stamp, "missing")!r}'
+                )
+    return 'runs differ:\n' + '\n'.join(lines[:40])
+
+
 @pytest.mark.timeout(300)
 def test_closed_loop_is_deterministic_under_load(monkeypatch, tmp_path):
     domain = isolate_ros(monkeypatch, 41)
@@ -85,7 +99,7 @@ def test_closed_loop_is_deterministic_under_load(monkeypatch, tmp_path):
     assert codes.get('sim_node') == 0, codes
     assert max(idle['velocity']) == max(loaded['velocity']) == 1_500_000_000  # ns: the duration
     assert len(idle['velocity']) == 76  # t = 0 and 75 periods
-    assert idle == loaded  # bit for bit
+    assert idle == loaded, differences(idle, loaded)  # bit for bit
     assert (
         len({tuple(p) for p in idle['applied'].values()}) >= 2
     )  # the routine did command something

@@ -20,7 +20,6 @@ import random
 from hypothesis import HealthCheck, settings
 from pulsejet_sim import analysis
 from pulsejet_sim.bag.reader import BagInfo, BagReadError, iter_bag
-from pulsejet_sim.bag.writer import BagWriter
 from pulsejet_sim.ros import replay
 from pulsejet_sim.studies import resim
 
@@ -38,13 +37,7 @@ def make_recording(path: Path, duration_s: float = 0.3) -> Path:
     from pulsejet_sim.scene import load_scene
     from pulsejet_sim.studies.runner import run_scene
 
-    defaults = BagWriter.__init__.__kwdefaults__
-    old = defaults['chunk_size_bytes']
-    defaults['chunk_size_bytes'] = CHUNK_BYTES
-    try:
-        run_scene(load_scene('escape'), duration_s, path)
-    finally:
-        defaults['chunk_size_bytes'] = old
+    run_scene(load_scene('escape'), duration_s, path, chunk_size_bytes=CHUNK_BYTES)
     return path
 
 

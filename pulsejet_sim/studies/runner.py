@@ -88,22 +88,28 @@ class RunResult:
 
 
 def run_scene(
-    scene: Scene, duration_s: float | None = None, out: str | Path | None = None
+    scene: Scene,
+    duration_s: float | None = None,
+    out: str | Path | None = None,
+    *,
+    chunk_size_bytes: int = RUN_CHUNK_BYTES,
 ) -> RunResult:
     """
     Run `scene` for duration_s of simulated time (default: the scene's), writing MCAP to `out`.
 
-    The file is written only if `out` is given. A blow-up ends the run early: the file keeps
-    everything before it, and the fault is returned (never a NaN message).
+    The file is written only if `out` is given, in MCAP chunks of about chunk_size_bytes
+    (uncompressed; small chunks for tests that cut a file between chunks). A blow-up ends the
+    run early: the file keeps everything before it, and the fault is returned (never a NaN
+    message).
     """
     drive = Drive(scene, scene.duration_s if duration_s is None else float(duration_s))
     if out is None:
         published = sum(1 for _ in drive)
         return RunResult(path=None, sim=drive.sim, publications=published, fault=drive.fault)
-    return _record(drive, Path(out))
+    return _record(drive, Path(out), chunk_size_bytes)
 
 
-def _record(drive: Drive, out: Path) -> RunResult:
+def _record(drive: Drive, out: Path, chunk_size_bytes: int = RUN_CHUNK_BYTES) -> RunResult:
     from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
     from pulsejet_sim.core.schema import dump_yaml
 
@@ -112,7 +118,7 @@ def _record(drive: Drive, out: Path) -> RunResult:
     # no fsync at close: a killed run's writes are with the OS already, and an offline run
     # reruns bit for bit from its scene (the sync cost ~5 % of a 10 s shell_robot run)
     writer = BagWriter(
-        out, chunk_size_bytes=RUN_CHUNK_BYTES, sync_on_close=False, zstd_level=RUN_ZSTD_LEVEL
+        out, chunk_size_bytes=chunk_size_bytes, sync_on_close=False, zstd_level=RUN_ZSTD_LEVEL
     )
     # the scene travels with the recording, so `pulsejet resim FILE` needs nothing else
     writer.add_metadata(
