@@ -291,9 +291,12 @@ def test_ctrl_c_mid_run_writes_every_publication_collected(tmp_path):
     script = tmp_path / 'child.py'
     script.write_text(CHILD_RUN)
     out = tmp_path / 'run.mcap'
+    # the child takes SIGINT as a terminal's Ctrl-C does: a suite started as a background job
+    # (nohup make test &) passes SIGINT on ignored, and the writer leaves an ignored signal alone
     proc = subprocess.Popen(
         [sys.executable, str(script), str(out)], stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1],
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     assert proc.stdout.readline().strip() == 'running', proc.stderr.read()
     proc.send_signal(signal.SIGINT)
