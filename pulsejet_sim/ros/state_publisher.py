@@ -25,7 +25,10 @@ from visualization_msgs.msg import Marker
 #: the meridian (tens of points) at most this often: at 1 kHz it would cost more than the rest of
 #: the state; every ledger publication carries one too
 PROFILE_RATE_MAX_HZ = 100.0
-QOS_DEPTH = 10
+#: samples kept for a reliable subscriber that lags (a recorder on a busy machine): in a
+#: closed-loop run nothing paces the states, and KEEP_LAST drops a sample not yet acknowledged
+#: once this many newer ones are sent (replay keeps as many)
+QOS_DEPTH = 100
 #: odom -> body, as every ROS odometry source broadcasts it (absolute: robots sharing a domain
 #: share the TF tree, frame_prefix keeps their frames apart)
 TOPIC_TF = '/tf'
