@@ -478,10 +478,12 @@ def _node_masses(
     )
     ma = Ca * rho * la * area if added_mass_on else np.zeros(n1)
     n0 = np.stack([-np.sin(th0), np.cos(th0)], axis=1)
+    per_area = Ca * rho * la if added_mass_on else 0.0
+    blocks = added_mass_blocks(meridian.r0, meridian.z0, E, per_area)
     Nd = np.zeros((n1, sk.N_NCOLS))
-    Nd[:, sk.N_MRR] = m + ma * n0[:, 0] ** 2
-    Nd[:, sk.N_MRZ] = ma * n0[:, 0] * n0[:, 1]
-    Nd[:, sk.N_MZZ] = m + ma * n0[:, 1] ** 2
+    Nd[:, sk.N_MRR] = m + blocks[:, 0]
+    Nd[:, sk.N_MRZ] = blocks[:, 1]
+    Nd[:, sk.N_MZZ] = m + blocks[:, 2]
     if code:
         # the authors' code: C_a times the shell's own mass, in every translation
         # (octopus_driver.m: Gammas_ag = Gammas+ro_shel*B*diag([0 0 0 2*h 2*h 2*h]), B = 1.1)
@@ -489,12 +491,36 @@ def _node_masses(
         Nd[:, sk.N_MRR] = m + ma
         Nd[:, sk.N_MRZ] = 0.0
         Nd[:, sk.N_MZZ] = m + ma
+        blocks = np.stack([ma, np.zeros(n1), ma], axis=1)
     Nd[:, sk.N_MTT] = material['rotary_inertia_scale'] * m * h * h / 3.0
     Nd[:, sk.N_DAREA] = area
     # axis contact radius: one half-thickness (inner faces meet), but never more than half the
     # node's reference radius (nodes next to the pole sit within a thickness of the axis)
     Nd[:, sk.N_HC] = np.minimum(h, 0.5 * r0)
-    return {'Nd': Nd, 'node_mass': m, 'node_added_mass': ma, 'n0': n0}
+    return {'Nd': Nd, 'node_mass': m, 'node_added_mass': ma, 'n0': n0, 'am_blocks': blocks}
+
+
+def added_mass_blocks(r0: np.ndarray, z0: np.ndarray, E: np.ndarray, per_area: float):
+    """
+    Return the nodes' added-mass blocks (n1, 3): the rr, rz and zz entries, kg.
+
+    Element by element: each element's added mass ``per_area * 2 pi r0m ds`` (``per_area`` =
+    C_a rho l_a) acts along the element's reference normal ``n_e`` (its chord's, turned a
+    quarter towards the outside); each end node takes half of it, so a node's block is the sum
+    over its two element halves of ``m_a,e / 2 * n_e n_e^T``. On a smooth wall this is the nodal
+    block ``m_a n0 n0^T`` to O(ds^2); at a kink each side keeps its own normal (the continuous
+    water's kinetic energy ``1/2 int C_a rho l_a (n . v)^2 dA`` of a uniform velocity is
+    reproduced exactly on a straight-sided meridian).
+    """
+    dr, dz = np.diff(r0), np.diff(z0)
+    chord = np.hypot(dr, dz)
+    nr, nz = -dz / chord, dr / chord  # n0 = (-sin theta, cos theta) of the chord's angle
+    half = 0.5 * per_area * E[:, sk.E_AREA]
+    per_element = np.stack([half * nr * nr, half * nr * nz, half * nz * nz], axis=1)
+    blocks = np.zeros((r0.size, 3))
+    blocks[:-1] += per_element
+    blocks[1:] += per_element
+    return blocks
 
 
 def _node_supports(
@@ -519,6 +545,7 @@ def _node_supports(
         # its axial place is the body's: no r-z coupling of the added mass at that node (the
         # residual would otherwise pull the vehicle speed held in the ring's axial slot into r)
         Nd[-1, sk.N_MRZ] = 0.0
+        nodes['am_blocks'][-1, 1] = 0.0
         free[-1] = True
     shell_free_mass = float(m[:-1].sum())
     code_rim = 0
@@ -817,6 +844,7 @@ class ShellModel:
         node_mass: np.ndarray,
         node_added_mass: np.ndarray,
         n0: np.ndarray,
+        am_blocks: np.ndarray,
         payload_kg: float,
         body_added_mass_kg: float,
         actuation: dict,
@@ -835,6 +863,8 @@ class ShellModel:
         self.node_mass = node_mass
         self.node_added_mass = node_added_mass
         self.n0 = n0
+        #: the nodes' added-mass blocks (rr, rz, zz), kg: the added-mass part of Nd's mass blocks
+        self.am_blocks = am_blocks
         self.payload_kg = payload_kg
         self.body_added_mass_kg = body_added_mass_kg
         self.actuation = actuation
@@ -908,6 +938,7 @@ class ShellModel:
             node_mass=nodes['node_mass'],
             node_added_mass=nodes['node_added_mass'],
             n0=nodes['n0'],
+            am_blocks=nodes['am_blocks'],
             payload_kg=vehicle['payload_kg'],
             body_added_mass_kg=vehicle['body_added_mass_kg'],
             actuation=actuation,
@@ -1204,11 +1235,10 @@ class ShellModel:
                 + self.Nd[:, sk.N_MTT] * v[:, 2] ** 2
             )
         )
-        if getattr(self, 'isotropic_added_mass', False):
-            k_am = 0.5 * float(np.sum(self.node_added_mass * (v[:, 0] ** 2 + v[:, 1] ** 2)))
-        else:
-            vn = v[:, 0] * self.n0[:, 0] + v[:, 1] * self.n0[:, 1]
-            k_am = 0.5 * float(np.sum(self.node_added_mass * vn**2))
+        b = self.am_blocks
+        k_am = 0.5 * float(np.sum(
+            b[:, 0] * v[:, 0] ** 2 + 2.0 * b[:, 1] * v[:, 0] * v[:, 1] + b[:, 2] * v[:, 1] ** 2
+        ))
         return self._stored_with(state, k_own, k_am)
 
     def _stored_many(self, states: np.ndarray) -> list[tuple]:
@@ -1225,11 +1255,8 @@ class ShellModel:
         own = np.add.reduce(
             self.node_mass * (vr**2 + vz**2) + self.Nd[:, sk.N_MTT] * v[:, :, 2] ** 2, axis=1
         )
-        if getattr(self, 'isotropic_added_mass', False):
-            am = np.add.reduce(self.node_added_mass * (vr**2 + vz**2), axis=1)
-        else:
-            vn = vr * self.n0[:, 0] + vz * self.n0[:, 1]
-            am = np.add.reduce(self.node_added_mass * vn**2, axis=1)
+        b = self.am_blocks
+        am = np.add.reduce(b[:, 0] * vr**2 + 2.0 * b[:, 1] * vr * vz + b[:, 2] * vz**2, axis=1)
         return [
             self._stored_with(state, 0.5 * float(k_own), 0.5 * float(k_am))
             for state, k_own, k_am in zip(states, own.tolist(), am.tolist())
