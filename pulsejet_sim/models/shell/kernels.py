@@ -559,8 +559,6 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
             ch = cdr * 0.5 * E[e, E_AREA]
             for k in range(2):
                 i = e + k
-                if Nd[i, N_FIXZ] > 0.5:
-                    continue
                 vt = vrel[3 * i] * c + (vrel[3 * i + 1] + U) * s
                 f = -ch * abs(vt) * vt
                 F[3 * i] += f * c * (1.0 - Nd[i, N_FIXR])
@@ -862,8 +860,6 @@ def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
             pzz = (1.0 - s * s) / ln
             for k2 in range(2):
                 i = e + k2
-                if Nd[i, N_FIXZ] > 0.5:
-                    continue
                 vr = vrel[3 * i]
                 vz = vrel[3 * i + 1] + U
                 vt = vr * c + vz * s

@@ -827,6 +827,7 @@ class ShellModel:
     name = 'shell'
     code_rim = 0  # paper_code: the node of the clamped rim around the pole
     isotropic_added_mass = False
+    ring_added_mass_kg = 0.0  # the held ring's element half's axial added mass, on the vehicle
     material_law = 'linear'  # material.law (from_scene)
     shear_modulus_pa = None  # neo_hookean: mu, Pa
     silicone = 'none'  # neo_hookean: the tabled silicone, if one was named
@@ -924,6 +925,11 @@ class ShellModel:
             for index, value in part.items():
                 P[index] = value
         P[sk.P_FORMATION_NUMBER] = formation_number
+        # the held ring's (or free edge's) element half: its water moves axially with the
+        # vehicle, so its axial added mass is the vehicle's (its drag reaches the vehicle through
+        # the ring's reaction, kernels.forces); the paper couplings keep their own vehicles
+        ring_am = float(nodes['am_blocks'][-1, 2]) if coupling == 'consistent' else 0.0
+        P[sk.P_MBODY] += ring_am
         # Newton's velocity scale: the shortest element per step
         P[sk.P_VSCALE] = float(E[:, sk.E_DS].min()) / sim['dt_s']
 
@@ -951,8 +957,9 @@ class ShellModel:
         model.coupling = coupling
         model.outlet = outlet['outlet']
         model.isotropic_added_mass = code
+        model.ring_added_mass_kg = ring_am
         model.code_rim = nodes['code_rim']
-        if code:
+        if code or ring_am:
             model._initial_energy = model._stored(model.initial_state())[0]
         model.material = {
             name: material[name]
@@ -1271,7 +1278,7 @@ class ShellModel:
         if self.flags & sk.F_PAPER:
             # node velocities are relative to the body: the vehicle carries the shell's own mass
             k_veh += 0.5 * float(self.P[sk.P_MSHELL]) * U * U
-        k_out = 0.5 * self.body_added_mass_kg * U * U + k_am
+        k_out = 0.5 * (self.body_added_mass_kg + self.ring_added_mass_kg) * U * U + k_am
         el = float(st[sk.T_EEL])
         # the water inside flowing towards the open end (0 unless fluid.internal_inertia is on)
         k_flow = 0.5 * float(self.P[sk.P_RHO] * self.inertance(state)) * float(st[sk.T_VDOT]) ** 2
