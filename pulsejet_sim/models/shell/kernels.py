@@ -698,7 +698,8 @@ def kinetic(Nd, v, U, P, V, flags):
 
     (shell kinetic incl. rotation, normal added-mass kinetic [included in the node mass blocks],
     vehicle 1/2 M U^2, internal fluid 1/2 rho V U^2).  The node blocks are
-    M = m I + m_a n0 n0^T, so the added-mass part is split off with the shell's own mass m.
+    M = m I + B (B the element halves' added mass, sum of m_a,e/2 n_e n_e^T), so the added-mass
+    part is split off with the shell's own mass m.
     """
     n1 = Nd.shape[0]
     ksh = 0.0

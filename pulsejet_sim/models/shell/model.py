@@ -20,12 +20,14 @@ strain): docs/theory/shell_rubber.md.
 
 *Masses.*  Lumped: ``m_i = rho_s 2h A_i`` (A_i the node's share of the reference area
 ``2 pi r0 dX``), rotary inertia ``m_i h^2/3`` (times ``material.rotary_inertia_scale``).
-Fluid added mass acts along the surface normal: ``m_a,i = C_a rho l_a A_i`` along the
-*reference* normal ``n0_i`` (l_a = ``fluid.added_mass_length_m``, default half the largest
-radius, i.e. the 2-D added mass per unit area ``rho a/2`` of a cylinder of radius a, times
-C_a = 1.1).  Using the reference normal keeps the mass matrix constant and the added-mass force
-conservative (kinetic energy ``1/2 m_a (n0 . v)^2``); it is approximate when the wall rotates a
-lot.
+Fluid added mass acts along the surface normal, element by element: ``C_a rho l_a`` per area
+(l_a = ``fluid.added_mass_length_m``, default half the largest radius, i.e. the 2-D added mass per
+unit area ``rho a/2`` of a cylinder of radius a, times C_a = 1.1) along each element's *reference*
+normal ``n_e``; each node's block sums its element halves' ``C_a rho l_a A_e/2 n_e n_e^T``
+(``added_mass_blocks``), so the node on a kink keeps each side's normal.  Using reference normals
+keeps the mass matrix constant and the added-mass force conservative; it is approximate when the
+wall rotates a lot.  The clamped ring's half moves axially with the vehicle: its axial added mass
+is the vehicle's (consistent coupling).
 
 *Frames.*  Positions are relative to the body; the axial node velocity is stored absolute
 (``w = z_dot + U``), which makes the mass matrix block diagonal.  The shell therefore feels the
@@ -40,8 +42,9 @@ rigid cap's own volume is not counted), ``V' = grad V . q_dot``.  Outflow (V' < 
 ``C_f rho A_out u_j^2`` on the vehicle.  Inflow through ``A_in``: suction ``p = -rho u_in^2/2`` and
 the ram force ``rho V' U`` of bringing the ingested water to the vehicle speed.  The internal
 water ``rho V`` moves with the vehicle.  Vehicle: ``(M + m_x + rho V) U' = T - 1/2 C_d rho
-pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell:
-``-1/2 rho C_t A_i |v_t| v_t`` along the current tangent.
+pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell, element by
+element: each element half ``-1/2 rho C_t A_e/2 |v_t| v_t`` along the element's current chord, on
+its node (the clamped ring's half through the ring's reaction, on the vehicle).
 
 *Couplings* (scene key ``coupling``; docs/theory/shell.md has the citations).  ``consistent``
 (default): as described above.  ``paper``: paper 000's scheme (its coupling of Fig. 5): the shell
@@ -126,10 +129,11 @@ load's total and first moment at any mesh and the mesh error is second order.
 *The other distributed loads, checked the same way.*  The muscle acts through each element's
 desired hoop stretch inside the element energy (one-point quadrature like the elastic terms: no
 nodal lumping).  The cavity pressure is ``p grad V`` of the discrete volume, its exact work
-conjugate.  The added mass and the tangential drag use the node's area ``A_i`` (half of each
-adjacent element's ``2 pi r0_m ds``): a nodal (row-sum) quadrature of ``int f N_i dA`` whose
-shares differ from the exact ``2 pi ds (2 r_i + r_j)/6`` by O(ds^2) relative and sum to the exact
-area, second order like the elements.  ``paper_code``'s wall-borne axial load takes the exact
+conjugate.  The added mass and the tangential drag act element by element: each element half
+(``A_e/2``, ``A_e = 2 pi r0_m ds``) with the element's own direction (reference normal, current
+chord), a row-sum quadrature of ``int f N_i dA`` whose shares differ from the exact
+``2 pi ds (2 r_i + r_j)/6`` by O(ds^2) relative and sum to the exact area, second order like the
+elements, also at a kink (docs/theory/shell.md, wall loads).  ``paper_code``'s wall-borne axial load takes the exact
 consistent shares of the wall from the rim on (``consistent_area_shares``).
 
 The muscle routine lowers the
