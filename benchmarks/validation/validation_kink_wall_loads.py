@@ -83,7 +83,8 @@ def main() -> int:
     stored = json.loads((V.OUT_DIR / 'results.json').read_text())['cases']
     lines = [
         common.header(
-            "Validation: the cable robot's mesh order before and after the element-wise wall loads",
+            "Validation: the cable robot's mesh order before and after the element-wise wall "
+            'loads',
             'python -m benchmarks.validation.validation_kink_wall_loads',
         ).rstrip('\n'),
         '',

@@ -133,8 +133,8 @@ conjugate.  The added mass and the tangential drag act element by element: each 
 (``A_e/2``, ``A_e = 2 pi r0_m ds``) with the element's own direction (reference normal, current
 chord), a row-sum quadrature of ``int f N_i dA`` whose shares differ from the exact
 ``2 pi ds (2 r_i + r_j)/6`` by O(ds^2) relative and sum to the exact area, second order like the
-elements, also at a kink (docs/theory/shell.md, wall loads).  ``paper_code``'s wall-borne axial load takes the exact
-consistent shares of the wall from the rim on (``consistent_area_shares``).
+elements, also at a kink (docs/theory/shell.md, wall loads).  ``paper_code``'s wall-borne axial
+load takes the exact consistent shares of the wall from the rim on (``consistent_area_shares``).
 
 The muscle routine lowers the
 desired hoop stretch to ``tau_d = 1 - amplitude a(t) s(X)`` (``s`` = 1 with smooth tapers at the
