@@ -547,8 +547,9 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
             pact += f * vrel[3 * i]
     # tangential quadratic drag relative to the water (absolute velocity), element by element:
     # each element half (node i's) takes -1/2 rho C_t (A_e/2) |v_t| v_t along the element's
-    # current chord, v_t node i's velocity along that chord; held axial nodes take none (their
-    # halves go to the supports, as before)
+    # current chord, v_t node i's velocity along that chord. The pole's radial share goes to the
+    # axis; the clamped ring (or free edge) moves axially with the vehicle, and its half's axial
+    # share goes into the ring's reaction, the vehicle's (docs/theory/shell.md, wall loads)
     pdrag = 0.0
     if (flags & F_DRAG) and not (flags & F_CODE):
         cdr = 0.5 * P[P_RHO] * P[P_CT]
