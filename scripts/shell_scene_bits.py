@@ -218,6 +218,7 @@ def fingerprint(scene) -> dict:
         'isotropic_added_mass': model.isotropic_added_mass,
         'payload_kg': model.payload_kg, 'body_added_mass_kg': model.body_added_mass_kg,
         'initial_perturbation_m': model.initial_perturbation_m,
+        'ring_added_mass_kg': model.ring_added_mass_kg,
         'initial_velocity_m_s': model.initial_velocity_m_s, 'duration_s': model.duration_s,
         'specialise_kernel': model.specialise_kernel,
         'keep_newton_workspace': model.keep_newton_workspace,
@@ -229,7 +230,8 @@ def fingerprint(scene) -> dict:
     sim.step(steps)
     return {
         'P': _sha(model.P),
-        'tables': _sha(model.E, model.Nd, model.node_mass, model.node_added_mass, model.n0),
+        'tables': _sha(model.E, model.Nd, model.node_mass, model.node_added_mass, model.n0,
+                       model.am_blocks),
         'attributes': hashlib.sha256(repr(sorted(attrs.items())).encode()).hexdigest(),
         'steps': steps,
         'state': _sha(sim.state),

@@ -1,26 +1,22 @@
 """
-Numerical experiment (not the validation): why the cable robot's speeds show no mesh order.
+Numerical experiment (not the validation): the cable robot's mesh order before and after issue 23.
 
 `pulsejet validate` refines each shell case on meshes that put a node on the cap/cylinder kink
-(36, 72, 144, checked against 288 elements; validation/convergence_plan.md). The volume converges
-there at the element's second order, but the speeds do not: their differences stay about the same
-at every doubling (observed orders near 0). The shell's added mass is a nodal block
-``m_a n0 n0^T`` along the node's reference normal (models/shell/model.py, ``_node_masses``), and
-the reference normal of the node on the kink is interpolated between the cap's and the cylinder's
-(geometry.build_reference_meridian): a normal that neither side has, on a node area of O(h). That
-is an O(h) error in the water's inertia, the term that couples the wall's radial motion to the
-vehicle's axial motion.
+(36, 72, 144, checked against 288 elements; validation/convergence_plan.md). Before issue 23's
+item 1 the volume converged there at the element's second order but the speeds did not (observed
+orders -0.51 to 0.48): two wall loads were nodal and took one direction over the node's whole
+area, which spans both sides of the kink. The added mass was a nodal block ``m_a n0 n0^T`` along
+the node's reference normal, interpolated between the cap's and the cylinder's at the kink node;
+the tangential drag ``-1/2 rho C_t A_i |v_t| v_t`` acted along the node's rotation; and the
+clamped ring's half element took neither load. An earlier run of this experiment (commit d3696d3)
+patched the kink node's added mass into its two sides' normals and switched the tangential drag
+off: every speed then converged at order 2.10-2.15.
 
-The tangential drag has the same form: ``-1/2 rho C_t A_i |v_t| v_t`` along the node's current
-rotation (kernels.py), one direction over a node area that spans both sides of the kink.
-
-The experiment reruns the same ladder (1) with the kink node's added-mass block split into its
-two halves, each with its own side's normal, ``m_a/A (A_cap/2 n_cap n_cap^T + A_cyl/2 n_cyl
-n_cyl^T)`` (on a smooth wall the two halves coincide with the node's block), patched into the
-built model's node table; (2) with the tangential drag off (``fluid.tangential_drag_coefficient:
-0``, an experiment that changes the physics, not a proposal); (3) both. No scene value and no
-model code changes. The as-coded ladder is read from docs/validation/results.json (same runs,
-same settings). Writes benchmarks/results/validation_kink_wall_loads.md.
+Since issue 23 item 1 the model applies both loads element by element (docs/theory/shell.md,
+wall loads). This table puts the stored ladders side by side: before, the "as coded" ladders of
+docs/validation/results.json at commit d3696d3 (the same settings; the values below), and after,
+the same file as `pulsejet validate` writes it now. No run of its own. Writes
+benchmarks/results/validation_kink_wall_loads.md.
 
     .venv/bin/python -m benchmarks.validation.validation_kink_wall_loads
 """
@@ -28,14 +24,11 @@ same settings). Writes benchmarks/results/validation_kink_wall_loads.md.
 from __future__ import annotations
 
 import json
-import math
 import sys
 
 from benchmarks import common
-import numpy as np
-from pulsejet_sim.models.shell import kernels as sk
 from pulsejet_sim.studies import validation as V
-from pulsejet_sim.studies.validation_convergence import kink_fractions, observed_order
+from pulsejet_sim.studies.validation_convergence import observed_order
 
 SHELL_CASES = (
     'cable_robot_from_rest',
@@ -44,27 +37,38 @@ SHELL_CASES = (
     'cable_robot_steady_starting_jet',
 )
 
-
-def split_kink_added_mass(scene) -> int:
-    """Give the kink node's added mass each side's normal on its half area; return the node."""
-    geometry = scene.data['geometry']
-    model = scene.model
-    Nd, E = model.Nd, model.E
-    n = E.shape[0]
-    k = int(round(n * kink_fractions(geometry)[0]))
-    alpha = float(geometry['cap_opening_rad'])
-    # reference normal n0 = (-sin theta, cos theta), theta the tangent angle from the pole: the
-    # cap ends at theta = -alpha, the cylinder runs at theta = -pi/2
-    n_cap = np.array([math.sin(alpha), math.cos(alpha)])
-    n_cyl = np.array([1.0, 0.0])
-    a_cap, a_cyl = 0.5 * E[k - 1, sk.E_AREA], 0.5 * E[k, sk.E_AREA]
-    per_area = float(model.node_added_mass[k]) / (a_cap + a_cyl)
-    block = per_area * (a_cap * np.outer(n_cap, n_cap) + a_cyl * np.outer(n_cyl, n_cyl))
-    m = float(model.node_mass[k])
-    Nd[k, sk.N_MRR] = m + block[0, 0]
-    Nd[k, sk.N_MRZ] = block[0, 1]
-    Nd[k, sk.N_MZZ] = m + block[1, 1]
-    return k
+#: the ladders 36 / 72 / 144 / 288 of docs/validation/results.json at commit d3696d3 (nodal wall
+#: loads, before issue 23 item 1)
+BEFORE = {
+    'cable_robot_from_rest': {
+        'mean_speed': (0.06986671636253153, 0.0698476254379789,
+            0.0698291786533109, 0.069814418437357),
+        'burst_speed': (0.09480538298402956, 0.09479588723256543,
+            0.09478232271002052, 0.09476960562547938),
+    },
+    'cable_robot_from_rest_starting_jet': {
+        'mean_speed': (0.07948874854235806, 0.07945985636511654,
+            0.07943684946000826, 0.07941998368668293),
+        'burst_speed': (0.1064950909041508, 0.10647599018542735,
+            0.10645808030198638, 0.1064434030388698),
+    },
+    'cable_robot_steady': {
+        'mean_speed': (0.0855890605385797, 0.08556746594194253,
+            0.08554900504645344, 0.08553456244721795),
+        'burst_speed': (0.09506306159391022, 0.09505348765018715,
+            0.09504002867221525, 0.09502741259367138),
+        'stroke_volume': (3.563592267142969e-05, 3.5653918892509005e-05,
+            3.565830392584577e-05, 3.56581155358162e-05),
+    },
+    'cable_robot_steady_starting_jet': {
+        'mean_speed': (0.09564621399345316, 0.09561431756841188,
+            0.09559111164802081, 0.09557452473328984),
+        'burst_speed': (0.10665594496299707, 0.10663692197949405,
+            0.106619202028878, 0.10660468875907951),
+        'stroke_volume': (3.421645466264423e-05, 3.423364162300093e-05,
+            3.423780993929511e-05, 3.423744831860734e-05),
+    },
+}
 
 
 def ladder_text(values) -> str:
@@ -75,70 +79,32 @@ def ladder_text(values) -> str:
     )
 
 
-# the variants: (label, scene overrides, split the kink node's added mass)
-NO_TANGENTIAL_DRAG = {'fluid': {'tangential_drag_coefficient': 0.0}}
-VARIANTS = (
-    ("kink node's added mass split", {}, True),
-    ('no tangential drag (C_t = 0)', NO_TANGENTIAL_DRAG, False),
-    ('both', NO_TANGENTIAL_DRAG, True),
-)
-
-
-def run_figures(case: dict, elements: int, dt_s: float, tol: float, extra: dict,
-                split: bool) -> dict:
-    """Return the case's figures at one mesh, step and Newton tolerance, in one variant."""
-    scene = V._scene(
-        case,
-        V.merge(
-            extra,
-            {'mesh': {'elements': elements},
-             'simulation': {'dt_s': dt_s, 'newton_tolerance': tol}},
-        ),
-    )
-    if split:
-        split_kink_added_mass(scene)
-    run = case['run']
-    trace = V.run_trace(scene, float(run['duration_s']), float(run['sample_period_s']))
-    print(case['id'], elements, extra, split, file=sys.stderr, flush=True)
-    return V.figures_of(case, trace)[0]
-
-
 def main() -> int:
     stored = json.loads((V.OUT_DIR / 'results.json').read_text())['cases']
     lines = [
         common.header(
-            "Validation: the kink node's wall loads and the cable robot's mesh order",
+            "Validation: the cable robot's mesh order before and after the element-wise wall "
+            'loads',
             'python -m benchmarks.validation.validation_kink_wall_loads',
         ).rstrip('\n'),
         '',
         'Each shell case of `pulsejet validate` on its kink-aligned ladder 36/72/144/288 (step '
-        'and Newton tolerance as the validation report): as coded (from '
-        "docs/validation/results.json, the same runs), with the kink node's added mass split "
-        "between its two sides' normals, with the tangential drag off (the other nodal wall load "
-        "that uses one direction, the node's rotation, over the node's whole area), and both. "
-        'Orders: log2 of the ratio of consecutive differences over 36/72/144 and 72/144/288. '
-        'The variants are experiments: they change the physics (C_t = 0) or patch the built '
-        "model's node table (split); no scene value and no model code changes.",
+        'and Newton tolerance as the validation report). Before: the nodal added mass and '
+        "tangential drag (one direction over the node's whole area; the ring's half element "
+        'without either), the ladders of docs/validation/results.json at commit d3696d3. After: '
+        'both loads element by element (issue 23 item 1), the same file as written now. Orders: '
+        'log2 of the ratio of consecutive differences over 36/72/144 and 72/144/288.',
         '',
-        '| case | figure | variant | 36 / 72 / 144 / 288 | orders |',
+        '| case | figure | wall loads | 36 / 72 / 144 / 288 | orders |',
         '|---|---|---|---|---|',
     ]
     for case_id in SHELL_CASES:
-        case = V.load_case(V.CASES_DIR / f'{case_id}.yaml')
         conv = stored[case_id]['convergence']
-        dt, tol = conv['ladder_dt_s'], conv['newton_tolerance']
-        ladder = [level['elements'] for level in conv['mesh_ladder']]
-        runs = {
-            label: [run_figures(case, n, dt, tol, extra, split) for n in ladder]
-            for label, extra, split in VARIANTS
-        }
         for name, entry in conv['figures'].items():
-            coded = entry['ladder'] + [entry['check']]
-            lines.append(f'| {case_id} | {name} | as coded | {ladder_text(coded)} |')
-            for label, values in runs.items():
-                lines.append(
-                    f'| | | {label} | {ladder_text([v[name] for v in values])} |'
-                )
+            after = entry['ladder'] + [entry['check']]
+            lines.append(f'| {case_id} | {name} | before: nodal | '
+                         f'{ladder_text(BEFORE[case_id][name])} |')
+            lines.append(f'| | | after: element by element | {ladder_text(after)} |')
     common.write('validation_kink_wall_loads', '\n'.join(lines) + '\n')
     return 0
 

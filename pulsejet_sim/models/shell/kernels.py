@@ -462,6 +462,17 @@ def code_rim(Nd):
     return kc
 
 
+@njit(cache=True, nogil=True, inline='always')
+def chord(q, e):
+    """Element e's current chord: its direction (cos, sin) from node e to e + 1 and length."""
+    dr = q[3 * e + 3] - q[3 * e]
+    dz = q[3 * e + 4] - q[3 * e + 1]
+    ln = math.sqrt(dr * dr + dz * dz)
+    if not ln > 0.0:
+        return 1.0, 0.0, 0.0
+    return dr / ln, dz / ln, ln
+
+
 @njit(cache=True, nogil=True)
 def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
     """
@@ -534,21 +545,26 @@ def forces(flags, q, v, U, t, amp_cmd, E, Nd, P, F, gV, vrel, st):
             f = -fc * Nd[i, N_WC]
             F[3 * i] += f
             pact += f * vrel[3 * i]
-    # tangential quadratic drag relative to the water (absolute velocity)
+    # tangential quadratic drag relative to the water (absolute velocity), element by element:
+    # each element half (node i's) takes -1/2 rho C_t (A_e/2) |v_t| v_t along the element's
+    # current chord, v_t node i's velocity along that chord. The pole's radial share goes to the
+    # axis; the clamped ring (or free edge) moves axially with the vehicle, and its half's axial
+    # share goes into the ring's reaction, the vehicle's (docs/theory/shell.md, wall loads)
     pdrag = 0.0
     if (flags & F_DRAG) and not (flags & F_CODE):
         cdr = 0.5 * P[P_RHO] * P[P_CT]
-        for i in range(n1):
-            if Nd[i, N_FIXZ] > 0.5:
+        for e in range(ne):
+            c, s, ln = chord(q, e)
+            if not ln > 0.0:
                 continue
-            th = q[3 * i + 2]
-            c = math.cos(th)
-            s = math.sin(th)
-            vt = vrel[3 * i] * c + (vrel[3 * i + 1] + U) * s
-            f = -cdr * Nd[i, N_DAREA] * abs(vt) * vt
-            F[3 * i] += f * c * (1.0 - Nd[i, N_FIXR])
-            F[3 * i + 1] += f * s
-            pdrag -= f * vt
+            ch = cdr * 0.5 * E[e, E_AREA]
+            for k in range(2):
+                i = e + k
+                vt = vrel[3 * i] * c + (vrel[3 * i + 1] + U) * s
+                f = -ch * abs(vt) * vt
+                F[3 * i] += f * c * (1.0 - Nd[i, N_FIXR])
+                F[3 * i + 1] += f * s
+                pdrag -= f * vt
     # cavity volume and pressure
     V = volume_grad(q, n1, gV)
     Vdot = 0.0
@@ -683,7 +699,8 @@ def kinetic(Nd, v, U, P, V, flags):
 
     (shell kinetic incl. rotation, normal added-mass kinetic [included in the node mass blocks],
     vehicle 1/2 M U^2, internal fluid 1/2 rho V U^2).  The node blocks are
-    M = m I + m_a n0 n0^T, so the added-mass part is split off with the shell's own mass m.
+    M = m I + B (B the element halves' added mass, sum of m_a,e/2 n_e n_e^T), so the added-mass
+    part is split off with the shell's own mass m.
     """
     n1 = Nd.shape[0]
     ksh = 0.0
@@ -831,19 +848,43 @@ def assemble_KC(flags, q, vrel, U, t, E, Nd, P, K, C):
             K[3 * i, BW] -= kk
             C[3 * i, BW] -= 2.0 * math.sqrt(kk * Nd[i, N_MRR])
     if (flags & F_DRAG) and not (flags & F_CODE):
+        # the element halves' drag (forces): dF/dv exact, and dF/dq through the chord's
+        # direction t = d/|d|, d = x_b - x_a: dF_i/dd = -ch (2 |v_t| t w^T + |v_t| v_t P),
+        # P = (I - t t^T)/|d|, w = P v
         cdr = 0.5 * P[P_RHO] * P[P_CT]
-        for i in range(n1):
-            if Nd[i, N_FIXZ] > 0.5:
+        for e in range(ne):
+            c, s, ln = chord(q, e)
+            if not ln > 0.0:
                 continue
-            th = q[3 * i + 2]
-            c = math.cos(th)
-            s = math.sin(th)
-            vt = vrel[3 * i] * c + (vrel[3 * i + 1] + U) * s
-            k = -2.0 * cdr * Nd[i, N_DAREA] * abs(vt)
-            C[3 * i, BW] += k * c * c
-            C[3 * i, 1 + BW] += k * c * s
-            C[3 * i + 1, -1 + BW] += k * c * s
-            C[3 * i + 1, BW] += k * s * s
+            ch = cdr * 0.5 * E[e, E_AREA]
+            prr = (1.0 - c * c) / ln
+            prz = -c * s / ln
+            pzz = (1.0 - s * s) / ln
+            for k2 in range(2):
+                i = e + k2
+                vr = vrel[3 * i]
+                vz = vrel[3 * i + 1] + U
+                vt = vr * c + vz * s
+                k = -2.0 * ch * abs(vt)
+                C[3 * i, BW] += k * c * c
+                C[3 * i, 1 + BW] += k * c * s
+                C[3 * i + 1, -1 + BW] += k * c * s
+                C[3 * i + 1, BW] += k * s * s
+                wr = prr * vr + prz * vz
+                wz = prz * vr + pzz * vz
+                g = -ch * abs(vt) * vt
+                grr = k * c * wr + g * prr
+                grz = k * c * wz + g * prz
+                gzr = k * s * wr + g * prz
+                gzz = k * s * wz + g * pzz
+                # d = x_{e+1} - x_e: +G on node e + 1's (r, z) columns, -G on node e's
+                for side in range(2):
+                    sg = 1.0 if side == 1 else -1.0
+                    col = 3 * (e + side)
+                    K[3 * i, col - 3 * i + BW] += sg * grr
+                    K[3 * i, col + 1 - 3 * i + BW] += sg * grz
+                    K[3 * i + 1, col - 3 * i - 1 + BW] += sg * gzr
+                    K[3 * i + 1, col + 1 - 3 * i - 1 + BW] += sg * gzz
 
 
 @njit(cache=True, nogil=True)

@@ -20,12 +20,14 @@ strain): docs/theory/shell_rubber.md.
 
 *Masses.*  Lumped: ``m_i = rho_s 2h A_i`` (A_i the node's share of the reference area
 ``2 pi r0 dX``), rotary inertia ``m_i h^2/3`` (times ``material.rotary_inertia_scale``).
-Fluid added mass acts along the surface normal: ``m_a,i = C_a rho l_a A_i`` along the
-*reference* normal ``n0_i`` (l_a = ``fluid.added_mass_length_m``, default half the largest
-radius, i.e. the 2-D added mass per unit area ``rho a/2`` of a cylinder of radius a, times
-C_a = 1.1).  Using the reference normal keeps the mass matrix constant and the added-mass force
-conservative (kinetic energy ``1/2 m_a (n0 . v)^2``); it is approximate when the wall rotates a
-lot.
+Fluid added mass acts along the surface normal, element by element: ``C_a rho l_a`` per area
+(l_a = ``fluid.added_mass_length_m``, default half the largest radius, i.e. the 2-D added mass per
+unit area ``rho a/2`` of a cylinder of radius a, times C_a = 1.1) along each element's *reference*
+normal ``n_e``; each node's block sums its element halves' ``C_a rho l_a A_e/2 n_e n_e^T``
+(``added_mass_blocks``), so the node on a kink keeps each side's normal.  Using reference normals
+keeps the mass matrix constant and the added-mass force conservative; it is approximate when the
+wall rotates a lot.  The clamped ring's half moves axially with the vehicle: its axial added mass
+is the vehicle's (consistent coupling).
 
 *Frames.*  Positions are relative to the body; the axial node velocity is stored absolute
 (``w = z_dot + U``), which makes the mass matrix block diagonal.  The shell therefore feels the
@@ -40,8 +42,9 @@ rigid cap's own volume is not counted), ``V' = grad V . q_dot``.  Outflow (V' < 
 ``C_f rho A_out u_j^2`` on the vehicle.  Inflow through ``A_in``: suction ``p = -rho u_in^2/2`` and
 the ram force ``rho V' U`` of bringing the ingested water to the vehicle speed.  The internal
 water ``rho V`` moves with the vehicle.  Vehicle: ``(M + m_x + rho V) U' = T - 1/2 C_d rho
-pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell:
-``-1/2 rho C_t A_i |v_t| v_t`` along the current tangent.
+pi max(r)^2 |U| U - ram + F_ring``.  Tangential drag on the shell, element by
+element: each element half ``-1/2 rho C_t A_e/2 |v_t| v_t`` along the element's current chord, on
+its node (the clamped ring's half through the ring's reaction, on the vehicle).
 
 *Couplings* (scene key ``coupling``; docs/theory/shell.md has the citations).  ``consistent``
 (default): as described above.  ``paper``: paper 000's scheme (its coupling of Fig. 5): the shell
@@ -126,11 +129,12 @@ load's total and first moment at any mesh and the mesh error is second order.
 *The other distributed loads, checked the same way.*  The muscle acts through each element's
 desired hoop stretch inside the element energy (one-point quadrature like the elastic terms: no
 nodal lumping).  The cavity pressure is ``p grad V`` of the discrete volume, its exact work
-conjugate.  The added mass and the tangential drag use the node's area ``A_i`` (half of each
-adjacent element's ``2 pi r0_m ds``): a nodal (row-sum) quadrature of ``int f N_i dA`` whose
-shares differ from the exact ``2 pi ds (2 r_i + r_j)/6`` by O(ds^2) relative and sum to the exact
-area, second order like the elements.  ``paper_code``'s wall-borne axial load takes the exact
-consistent shares of the wall from the rim on (``consistent_area_shares``).
+conjugate.  The added mass and the tangential drag act element by element: each element half
+(``A_e/2``, ``A_e = 2 pi r0_m ds``) with the element's own direction (reference normal, current
+chord), a row-sum quadrature of ``int f N_i dA`` whose shares differ from the exact
+``2 pi ds (2 r_i + r_j)/6`` by O(ds^2) relative and sum to the exact area, second order like the
+elements, also at a kink (docs/theory/shell.md, wall loads).  ``paper_code``'s wall-borne axial
+load takes the exact consistent shares of the wall from the rim on (``consistent_area_shares``).
 
 The muscle routine lowers the
 desired hoop stretch to ``tau_d = 1 - amplitude a(t) s(X)`` (``s`` = 1 with smooth tapers at the
@@ -478,10 +482,12 @@ def _node_masses(
     )
     ma = Ca * rho * la * area if added_mass_on else np.zeros(n1)
     n0 = np.stack([-np.sin(th0), np.cos(th0)], axis=1)
+    per_area = Ca * rho * la if added_mass_on else 0.0
+    blocks = added_mass_blocks(meridian.r0, meridian.z0, E, per_area)
     Nd = np.zeros((n1, sk.N_NCOLS))
-    Nd[:, sk.N_MRR] = m + ma * n0[:, 0] ** 2
-    Nd[:, sk.N_MRZ] = ma * n0[:, 0] * n0[:, 1]
-    Nd[:, sk.N_MZZ] = m + ma * n0[:, 1] ** 2
+    Nd[:, sk.N_MRR] = m + blocks[:, 0]
+    Nd[:, sk.N_MRZ] = blocks[:, 1]
+    Nd[:, sk.N_MZZ] = m + blocks[:, 2]
     if code:
         # the authors' code: C_a times the shell's own mass, in every translation
         # (octopus_driver.m: Gammas_ag = Gammas+ro_shel*B*diag([0 0 0 2*h 2*h 2*h]), B = 1.1)
@@ -489,12 +495,36 @@ def _node_masses(
         Nd[:, sk.N_MRR] = m + ma
         Nd[:, sk.N_MRZ] = 0.0
         Nd[:, sk.N_MZZ] = m + ma
+        blocks = np.stack([ma, np.zeros(n1), ma], axis=1)
     Nd[:, sk.N_MTT] = material['rotary_inertia_scale'] * m * h * h / 3.0
     Nd[:, sk.N_DAREA] = area
     # axis contact radius: one half-thickness (inner faces meet), but never more than half the
     # node's reference radius (nodes next to the pole sit within a thickness of the axis)
     Nd[:, sk.N_HC] = np.minimum(h, 0.5 * r0)
-    return {'Nd': Nd, 'node_mass': m, 'node_added_mass': ma, 'n0': n0}
+    return {'Nd': Nd, 'node_mass': m, 'node_added_mass': ma, 'n0': n0, 'am_blocks': blocks}
+
+
+def added_mass_blocks(r0: np.ndarray, z0: np.ndarray, E: np.ndarray, per_area: float):
+    """
+    Return the nodes' added-mass blocks (n1, 3): the rr, rz and zz entries, kg.
+
+    Element by element: each element's added mass ``per_area * 2 pi r0m ds`` (``per_area`` =
+    C_a rho l_a) acts along the element's reference normal ``n_e`` (its chord's, turned a
+    quarter towards the outside); each end node takes half of it, so a node's block is the sum
+    over its two element halves of ``m_a,e / 2 * n_e n_e^T``. On a smooth wall this is the nodal
+    block ``m_a n0 n0^T`` to O(ds^2); at a kink each side keeps its own normal (the continuous
+    water's kinetic energy ``1/2 int C_a rho l_a (n . v)^2 dA`` of a uniform velocity is
+    reproduced exactly on a straight-sided meridian).
+    """
+    dr, dz = np.diff(r0), np.diff(z0)
+    chord = np.hypot(dr, dz)
+    nr, nz = -dz / chord, dr / chord  # n0 = (-sin theta, cos theta) of the chord's angle
+    half = 0.5 * per_area * E[:, sk.E_AREA]
+    per_element = np.stack([half * nr * nr, half * nr * nz, half * nz * nz], axis=1)
+    blocks = np.zeros((r0.size, 3))
+    blocks[:-1] += per_element
+    blocks[1:] += per_element
+    return blocks
 
 
 def _node_supports(
@@ -519,6 +549,7 @@ def _node_supports(
         # its axial place is the body's: no r-z coupling of the added mass at that node (the
         # residual would otherwise pull the vehicle speed held in the ring's axial slot into r)
         Nd[-1, sk.N_MRZ] = 0.0
+        nodes['am_blocks'][-1, 1] = 0.0
         free[-1] = True
     shell_free_mass = float(m[:-1].sum())
     code_rim = 0
@@ -800,6 +831,7 @@ class ShellModel:
     name = 'shell'
     code_rim = 0  # paper_code: the node of the clamped rim around the pole
     isotropic_added_mass = False
+    ring_added_mass_kg = 0.0  # the held ring's element half's axial added mass, on the vehicle
     material_law = 'linear'  # material.law (from_scene)
     shear_modulus_pa = None  # neo_hookean: mu, Pa
     silicone = 'none'  # neo_hookean: the tabled silicone, if one was named
@@ -817,6 +849,7 @@ class ShellModel:
         node_mass: np.ndarray,
         node_added_mass: np.ndarray,
         n0: np.ndarray,
+        am_blocks: np.ndarray,
         payload_kg: float,
         body_added_mass_kg: float,
         actuation: dict,
@@ -835,6 +868,8 @@ class ShellModel:
         self.node_mass = node_mass
         self.node_added_mass = node_added_mass
         self.n0 = n0
+        #: the nodes' added-mass blocks (rr, rz, zz), kg: the added-mass part of Nd's mass blocks
+        self.am_blocks = am_blocks
         self.payload_kg = payload_kg
         self.body_added_mass_kg = body_added_mass_kg
         self.actuation = actuation
@@ -894,6 +929,11 @@ class ShellModel:
             for index, value in part.items():
                 P[index] = value
         P[sk.P_FORMATION_NUMBER] = formation_number
+        # the held ring's (or free edge's) element half: its water moves axially with the
+        # vehicle, so its axial added mass is the vehicle's (its drag reaches the vehicle through
+        # the ring's reaction, kernels.forces); the paper couplings keep their own vehicles
+        ring_am = float(nodes['am_blocks'][-1, 2]) if coupling == 'consistent' else 0.0
+        P[sk.P_MBODY] += ring_am
         # Newton's velocity scale: the shortest element per step
         P[sk.P_VSCALE] = float(E[:, sk.E_DS].min()) / sim['dt_s']
 
@@ -908,6 +948,7 @@ class ShellModel:
             node_mass=nodes['node_mass'],
             node_added_mass=nodes['node_added_mass'],
             n0=nodes['n0'],
+            am_blocks=nodes['am_blocks'],
             payload_kg=vehicle['payload_kg'],
             body_added_mass_kg=vehicle['body_added_mass_kg'],
             actuation=actuation,
@@ -920,8 +961,9 @@ class ShellModel:
         model.coupling = coupling
         model.outlet = outlet['outlet']
         model.isotropic_added_mass = code
+        model.ring_added_mass_kg = ring_am
         model.code_rim = nodes['code_rim']
-        if code:
+        if code or ring_am:
             model._initial_energy = model._stored(model.initial_state())[0]
         model.material = {
             name: material[name]
@@ -1204,11 +1246,10 @@ class ShellModel:
                 + self.Nd[:, sk.N_MTT] * v[:, 2] ** 2
             )
         )
-        if getattr(self, 'isotropic_added_mass', False):
-            k_am = 0.5 * float(np.sum(self.node_added_mass * (v[:, 0] ** 2 + v[:, 1] ** 2)))
-        else:
-            vn = v[:, 0] * self.n0[:, 0] + v[:, 1] * self.n0[:, 1]
-            k_am = 0.5 * float(np.sum(self.node_added_mass * vn**2))
+        b = self.am_blocks
+        k_am = 0.5 * float(np.sum(
+            b[:, 0] * v[:, 0] ** 2 + 2.0 * b[:, 1] * v[:, 0] * v[:, 1] + b[:, 2] * v[:, 1] ** 2
+        ))
         return self._stored_with(state, k_own, k_am)
 
     def _stored_many(self, states: np.ndarray) -> list[tuple]:
@@ -1225,11 +1266,8 @@ class ShellModel:
         own = np.add.reduce(
             self.node_mass * (vr**2 + vz**2) + self.Nd[:, sk.N_MTT] * v[:, :, 2] ** 2, axis=1
         )
-        if getattr(self, 'isotropic_added_mass', False):
-            am = np.add.reduce(self.node_added_mass * (vr**2 + vz**2), axis=1)
-        else:
-            vn = vr * self.n0[:, 0] + vz * self.n0[:, 1]
-            am = np.add.reduce(self.node_added_mass * vn**2, axis=1)
+        b = self.am_blocks
+        am = np.add.reduce(b[:, 0] * vr**2 + 2.0 * b[:, 1] * vr * vz + b[:, 2] * vz**2, axis=1)
         return [
             self._stored_with(state, 0.5 * float(k_own), 0.5 * float(k_am))
             for state, k_own, k_am in zip(states, own.tolist(), am.tolist())
@@ -1244,7 +1282,7 @@ class ShellModel:
         if self.flags & sk.F_PAPER:
             # node velocities are relative to the body: the vehicle carries the shell's own mass
             k_veh += 0.5 * float(self.P[sk.P_MSHELL]) * U * U
-        k_out = 0.5 * self.body_added_mass_kg * U * U + k_am
+        k_out = 0.5 * (self.body_added_mass_kg + self.ring_added_mass_kg) * U * U + k_am
         el = float(st[sk.T_EEL])
         # the water inside flowing towards the open end (0 unless fluid.internal_inertia is on)
         k_flow = 0.5 * float(self.P[sk.P_RHO] * self.inertance(state)) * float(st[sk.T_VDOT]) ** 2
