@@ -109,7 +109,7 @@ def run_scene(
     return _record(drive, Path(out), chunk_size_bytes)
 
 
-def _record(drive: Drive, out: Path, chunk_size_bytes: int = RUN_CHUNK_BYTES) -> RunResult:
+def _record(drive: Drive, out: Path, chunk_size_bytes: int) -> RunResult:
     from pulsejet_sim.bag.writer import BagWriter, install_signal_handlers
     from pulsejet_sim.core.schema import dump_yaml
 
