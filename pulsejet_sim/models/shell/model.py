@@ -37,8 +37,9 @@ force at the clamped ring, the jet thrust and the inflow ram force.
 
 *Fluid and jet.*  Cavity volume ``V`` = sum of frusta between the shell and the ring plane (the
 rigid cap's own volume is not counted), ``V' = grad V . q_dot``.  Outflow (V' < 0) through
-``A_out``: ``u_j = -V'/A_out``, cavity pressure ``p = rho u_j^2/2`` acting on the inner surface
-(generalised force ``p grad V``; so the wall pays the jet's kinetic energy), thrust
+``A_out`` (``jet.contraction_coefficient`` Cc times the fixed outlet's area: a sharp-edged
+exit's vena contracta): ``u_j = -V'/A_out``, cavity pressure ``p = rho u_j^2/2`` acting on the
+inner surface (generalised force ``p grad V``; so the wall pays the jet's kinetic energy), thrust
 ``C_f rho A_out u_j^2`` on the vehicle.  Inflow through ``A_in``: suction ``p = -rho u_in^2/2`` and
 the ram force ``rho V' U`` of bringing the ingested water to the vehicle speed.  The internal
 water ``rho V`` moves with the vehicle.  Vehicle: ``(M + m_x + rho V) U' = T - 1/2 C_d rho
@@ -394,8 +395,39 @@ def _read_jet_outlet(
         jet, 'jet', 'inlet_area_m2', keys.JET_SPEC, default=A_out + 3 * math.pi * 0.01**2
     )
     Cf = keys.read(jet, 'jet', 'thrust_coefficient', keys.JET_SPEC)
+    Cc = _contraction_coefficient(jet, outlet)
     out = {'outlet': outlet, 'free_edge': outlet in ('edge', 'free_edge_fixed_nozzle')}
-    return jet, out, {sk.P_AOUT: A_out, sk.P_AIN: A_in, sk.P_CF: Cf}
+    # the jet leaves through its vena contracta, Cc A_out (Cc = 1: the outlet itself; 1.0 * A_out
+    # is A_out to the bit); the refill opening's default stays the outlet's geometric area
+    return jet, out, {sk.P_AOUT: Cc * A_out, sk.P_AIN: A_in, sk.P_CF: Cf}
+
+
+def _contraction_coefficient(jet: Mapping[str, Any], outlet: str) -> float:
+    """
+    Return ``jet.contraction_coefficient`` Cc (1: no vena contracta), refusing what it cannot do.
+
+    A sharp-edged exit's jet keeps converging past the outlet to a vena contracta of Cc times
+    its area (docs/theory/shell.md, the jet): the jet leaves at ``Q / (Cc A)``.  With ``outlet:
+    edge`` the outlet is the moving edge, whose contraction is not modelled; the starting jet's
+    ring (``starting_jet``) forms at the outlet's own diameter, and the two together are not
+    modelled either.
+    """
+    Cc = keys.read(jet, 'jet', 'contraction_coefficient', keys.JET_SPEC)
+    if Cc == 1.0:
+        return Cc
+    if outlet == 'edge':
+        raise ModelError(
+            f'jet.contraction_coefficient: {Cc!r} is not modelled with outlet: edge (the '
+            "mantle's moving edge is the nozzle); allowed: 1 (or leave it out), or outlet: ring "
+            'or free_edge_fixed_nozzle'
+        )
+    if keys.read(jet, 'jet', 'starting_jet', keys.JET_SPEC):
+        raise ModelError(
+            f'jet.contraction_coefficient: {Cc!r} is not modelled with starting_jet: true (the '
+            "ring forms at the outlet's own diameter); allowed: 1 (or leave it out), or "
+            'starting_jet: false'
+        )
+    return Cc
 
 
 def _read_water_inside(

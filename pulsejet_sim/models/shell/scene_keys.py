@@ -201,6 +201,11 @@ JET_SPEC = {
     'inlet_area_m2': _number(None, 1e-8, 10.0, 'm^2', 'the refill opening',
                              default='outlet + 3 pi (10 mm)^2'),
     'thrust_coefficient': _number(1.0, 0.0, 2.0, '', 'C_f'),
+    'contraction_coefficient': _number(
+        1.0, 0.5, 1.0, '', "Cc: the outflow's vena contracta is Cc times the fixed outlet's "
+        'area (1: none; a sharp-edged orifice about 0.61-0.65; docs/theory/shell.md, the jet; '
+        'not with outlet: edge or starting_jet)',
+    ),
     'starting_jet': Key(
         Flag(False),
         "true: the forming vortex ring's exit over-pressure (consistent coupling, implicit "
