@@ -56,6 +56,8 @@ def test_the_jet_leaves_through_cc_times_the_outlet():
     assert u1 == pytest.approx(-q / (CC * area), rel=1e-12)
     assert p1 == pytest.approx(0.5 * rho * u1**2, rel=1e-12)
     assert p1 / p0 == pytest.approx(1 / CC**2, rel=1e-12)
+    # the orifice's discharge law, velocity coefficient 1: Q = Cc A sqrt(2 p / rho)
+    assert -q == pytest.approx(CC * area * math.sqrt(2 * p1 / rho), rel=1e-12)
     assert thrust1 / thrust0 == pytest.approx(1 / CC, rel=1e-12)
 
 
