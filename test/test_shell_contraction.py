@@ -94,12 +94,24 @@ def test_ledger_closes_at_second_order_with_the_vena_contracta():
         ({'contraction_coefficient': 0.7, 'outlet': 'edge'}, ['0.7', 'outlet: edge', 'allowed']),
         (
             {'contraction_coefficient': 0.7, 'starting_jet': True},
-            ['0.7', 'starting_jet', 'allowed'],
+            ['0.7', 'starting_jet', 'twice', 'allowed'],
+        ),
+        (
+            {
+                'contraction_coefficient': 0.7,
+                'outlet': 'free_edge_fixed_nozzle',
+                'coupling': 'paper',
+            },
+            ['0.7', 'coupling: paper', 'allowed'],
         ),
     ],
 )
 def test_what_it_cannot_do_is_refused_with_what_is_allowed(jet, words):
+    jet = dict(jet)
+    coupling = jet.pop('coupling', None)
     scene = robot(jet)
+    if coupling:
+        scene['coupling'] = coupling
     if jet.get('outlet') == 'edge':
         del scene['jet']['outlet_radius_m']
     with pytest.raises(ModelError) as err:

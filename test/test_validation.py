@@ -139,12 +139,14 @@ def test_sharp_edged_exit_rerun_matches_its_stored_experiment(tmp_path):
     for name, value in stored['figures'].items():
         assert rerun['figures'][name] == pytest.approx(value, rel=1e-9), name
     # what the model does there, as the docs state it: the stroke is the shipped scene's (the
-    # amplitude's only target), the mean comes within 25 % of the measured 0.135 m/s, the burst
-    # does not: the burst/mean ratio stays within 2 % of the shipped exit's 1.11 (measured 1.48)
+    # amplitude's only target), the mean rises by about 20 % over the shipped exit's and stays
+    # short of the measured 0.135 m/s, the burst stays far short of the measured 0.2 m/s, and the
+    # burst/mean ratio stays within 2 % of the shipped exit's 1.11 (measured 1.48)
     shipped = {f['figure']: f['predicted'] for f in stored_results()[key[0]]['figures']}
     figures = rerun['figures']
     assert figures['stroke_volume'] == pytest.approx(shipped['stroke_volume'], rel=2e-3)
-    assert 0.75 < figures['mean_speed'] / 0.135 < 0.8
+    assert 1.15 < figures['mean_speed'] / shipped['mean_speed'] < 1.25
+    assert figures['mean_speed'] < 0.8 * 0.135
     assert figures['burst_speed'] / 0.2 < 0.6
     ratio = figures['burst_speed'] / figures['mean_speed']
     assert ratio < 1.02 * shipped['burst_speed'] / shipped['mean_speed'] < 1.2

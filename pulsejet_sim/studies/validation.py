@@ -937,6 +937,7 @@ def run_posthoc(path: Path, cases_dir: Path, log=print) -> list[dict]:
                     'fault': trace.fault,
                     'figures': values,
                     'measured': {f['id']: f['measured'] for f in case['figures']},
+                    'status': {f['id']: f['status'] for f in case['figures']},
                     'budget': energy_budget(case, trace, values, window),
                 }
             )
@@ -957,8 +958,12 @@ def write_posthoc(items: list[dict], out_dir: Path) -> Path:
     for item in items:
         terms = item['budget']['terms_j']
         given = terms.get('in_initial', 0.0) + terms.get('in_actuation_work', 0.0)
+        status = item.get('status', {})
         figs = ', '.join(
-            f'{k} {_g(v)} (measured {_g(item["measured"][k])})' for k, v in item['figures'].items()
+            f'{k} {_g(v)} (measured {_g(item["measured"][k])}'
+            + (f', {status[k]}' if status.get(k, 'predicted') != 'predicted' else '')
+            + ')'
+            for k, v in item['figures'].items()
         )
         shares = ', '.join(
             f'{LABELS.get(k, k).split(" (")[0]} {100 * v / given:.0f} %'

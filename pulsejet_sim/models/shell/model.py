@@ -395,26 +395,47 @@ def _read_jet_outlet(
         jet, 'jet', 'inlet_area_m2', keys.JET_SPEC, default=A_out + 3 * math.pi * 0.01**2
     )
     Cf = keys.read(jet, 'jet', 'thrust_coefficient', keys.JET_SPEC)
-    Cc = _contraction_coefficient(jet, outlet)
+    Cc = _contraction_coefficient(jet, outlet, coupling)
     out = {'outlet': outlet, 'free_edge': outlet in ('edge', 'free_edge_fixed_nozzle')}
     # the jet leaves through its vena contracta, Cc A_out (Cc = 1: the outlet itself; 1.0 * A_out
     # is A_out to the bit); the refill opening's default stays the outlet's geometric area
     return jet, out, {sk.P_AOUT: Cc * A_out, sk.P_AIN: A_in, sk.P_CF: Cf}
 
 
-def _contraction_coefficient(jet: Mapping[str, Any], outlet: str) -> float:
+def _contraction_coefficient(jet: Mapping[str, Any], outlet: str, coupling: str) -> float:
     """
     Return ``jet.contraction_coefficient`` Cc (1: no vena contracta), refusing what it cannot do.
 
     A sharp-edged exit's jet keeps converging past the outlet to a vena contracta of Cc times
-    its area (docs/theory/shell.md, the jet): the jet leaves at ``Q / (Cc A)``.  With ``outlet:
-    edge`` the outlet is the moving edge, whose contraction is not modelled; the starting jet's
-    ring (``starting_jet``) forms at the outlet's own diameter, and the two together are not
-    modelled either.
+    its area (docs/theory/shell.md, the exit's vena contracta): the jet leaves at ``Q / (Cc A)``
+    and the cavity pays for it.  Refused: with ``outlet: edge`` (the moving edge's contraction is
+    not modelled); with ``starting_jet`` (both are the exit plane's over-pressure of a converging
+    flow, so the two together would count it twice); and outside the consistent coupling (the
+    paper couplings have no cavity pressure to pay the faster jet: it would only raise their
+    created, unpaid jet energy).
     """
     Cc = keys.read(jet, 'jet', 'contraction_coefficient', keys.JET_SPEC)
     if Cc == 1.0:
         return Cc
+    allowed = 'allowed: 1 (or leave it out)'
+    if coupling != 'consistent':
+        raise ModelError(
+            f'jet.contraction_coefficient: {Cc!r} is not available with coupling: {coupling} '
+            f'(no cavity pressure pays the faster jet there); {allowed}, or coupling: consistent'
+        )
+    if outlet == 'edge':
+        raise ModelError(
+            f'jet.contraction_coefficient: {Cc!r} is not modelled with outlet: edge (the '
+            f"mantle's moving edge is the nozzle); {allowed}, or outlet: ring or "
+            'free_edge_fixed_nozzle'
+        )
+    if keys.read(jet, 'jet', 'starting_jet', keys.JET_SPEC):
+        raise ModelError(
+            f'jet.contraction_coefficient: {Cc!r} is not available with starting_jet: true (both '
+            "are the exit plane's over-pressure of a converging flow: together they would count "
+            f'it twice); {allowed}, or starting_jet: false'
+        )
+    return Cc
     if outlet == 'edge':
         raise ModelError(
             f'jet.contraction_coefficient: {Cc!r} is not modelled with outlet: edge (the '

@@ -203,8 +203,8 @@ JET_SPEC = {
     'thrust_coefficient': _number(1.0, 0.0, 2.0, '', 'C_f'),
     'contraction_coefficient': _number(
         1.0, 0.5, 1.0, '', "Cc: the outflow's vena contracta is Cc times the fixed outlet's "
-        'area (1: none; a sharp-edged orifice about 0.61-0.65; docs/theory/shell.md, the jet; '
-        'not with outlet: edge or starting_jet)',
+        'area (1: none; a sharp-edged orifice about 0.61-0.65; docs/theory/shell.md; consistent '
+        'coupling, not with outlet: edge or starting_jet)',
     ),
     'starting_jet': Key(
         Flag(False),
