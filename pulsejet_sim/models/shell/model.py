@@ -436,19 +436,6 @@ def _contraction_coefficient(jet: Mapping[str, Any], outlet: str, coupling: str)
             f'it twice); {allowed}, or starting_jet: false'
         )
     return Cc
-    if outlet == 'edge':
-        raise ModelError(
-            f'jet.contraction_coefficient: {Cc!r} is not modelled with outlet: edge (the '
-            "mantle's moving edge is the nozzle); allowed: 1 (or leave it out), or outlet: ring "
-            'or free_edge_fixed_nozzle'
-        )
-    if keys.read(jet, 'jet', 'starting_jet', keys.JET_SPEC):
-        raise ModelError(
-            f'jet.contraction_coefficient: {Cc!r} is not modelled with starting_jet: true (the '
-            "ring forms at the outlet's own diameter); allowed: 1 (or leave it out), or "
-            'starting_jet: false'
-        )
-    return Cc
 
 
 def _read_water_inside(
