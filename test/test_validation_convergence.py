@@ -93,7 +93,7 @@ def test_a_real_ladder_volume_and_speed_at_second_order():
     )
     case['run'].update(duration_s=1.25, window={'from_s': 0.0, 'to_s': 1.25})
     case['figures'].append(dict(case['figures'][0], id='stroke', quantity='volume_range'))
-    scene = validation._scene(case)
+    scene = validation.case_scene(case)
     trace = validation.run_trace(scene, 1.25, 0.01)
     values = validation.figures_of(case, trace)[0]
     conv = validation.shell_case_convergence(case, scene, values, case['run'])

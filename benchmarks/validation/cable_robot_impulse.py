@@ -30,8 +30,6 @@ import time
 
 from benchmarks import common
 import numpy as np
-from pulsejet_sim.engine.simulation import Simulation
-from pulsejet_sim.routines import routine_from_scene
 from pulsejet_sim.studies import validation
 import yaml
 
@@ -52,7 +50,7 @@ def variants() -> dict[str, dict]:
 def finer(overrides: dict) -> dict:
     """Return the overrides at twice the case scene's elements and half its step."""
     case = validation.load_case(validation.CASES_DIR / f'{CASE}.yaml')
-    scene = validation._scene(case, overrides)
+    scene = validation.case_scene(case, overrides)
     return {
         **overrides,
         'mesh': {'elements': 2 * int(scene.data['mesh']['elements'])},
@@ -63,21 +61,10 @@ def finer(overrides: dict) -> dict:
 def figures(overrides: dict) -> dict:
     """Run the case's scene with `overrides`; return the window's speeds, impulse and mass."""
     case = validation.load_case(validation.CASES_DIR / f'{CASE}.yaml')
-    scene = validation._scene(case, overrides)
-    model = scene.model
-    sim = Simulation(model)
-    routine = routine_from_scene(scene.routine)
-    obs = sim.observe()
-    t, speed, thrust, drag, volume = [], [], [], [], []
-    for _ in range(int(round(DURATION_S / model.dt_s))):
-        command = routine.command(sim.time_s, obs.volume_m3) if routine else sim.command
-        obs = sim.step(1, command)
-        t.append(sim.time_s)
-        speed.append(obs.velocity_m_s)
-        thrust.append(obs.thrust_n)
-        drag.append(-obs.drag_n)
-        volume.append(obs.volume_m3)
-    t, speed, thrust, drag, volume = map(np.asarray, (t, speed, thrust, drag, volume))
+    scene = validation.case_scene(case, overrides)
+    trace = validation.run_trace(scene, DURATION_S, scene.model.dt_s)
+    assert trace.fault is None, trace.fault
+    t, speed, volume = trace.t, trace.v, trace.volume
     rho = float(scene.data['fluid']['density_kg_m3'])
     # the refill's ram force rho V' U (V' > 0: water drawn in), V' from the sampled volumes
     ram = rho * np.maximum(np.gradient(volume, t), 0.0) * speed
@@ -86,8 +73,9 @@ def figures(overrides: dict) -> dict:
     def per_cycle(force):
         return float(np.trapezoid(force[w], t[w])) / CYCLES
 
-    impulse, body_drag, ram_impulse = per_cycle(thrust), per_cycle(drag), per_cycle(ram)
-    body = float(scene.data['vehicle']['mass_kg']) + model.body_added_mass_kg
+    impulse, ram_impulse = per_cycle(trace.thrust), per_cycle(ram)
+    body_drag = per_cycle(-trace.drag)
+    body = float(scene.data['vehicle']['mass_kg']) + scene.model.body_added_mass_kg
     return {
         'mean': float(np.mean(speed[w])),
         'max': float(np.max(speed[w])),

@@ -173,7 +173,7 @@ def load_case(path: Path) -> dict:
 
 @dataclass
 class Trace:
-    """Samples of one run: time, position, velocity, acceleration, volume, fluid mass, ledgers."""
+    """Samples of one run: time, motion, volume, fluid mass, thrust and drag, ledgers."""
 
     t: np.ndarray
     x: np.ndarray
@@ -181,6 +181,8 @@ class Trace:
     a: np.ndarray
     volume: np.ndarray
     fluid_mass: np.ndarray
+    thrust: np.ndarray  # N, jet thrust on the vehicle, forward +
+    drag: np.ndarray  # N, drag on the vehicle, forward + (negative while swimming forward)
     ledgers: list
     dt_s: float
     fault: str | None
@@ -220,6 +222,8 @@ def run_trace(scene, duration_s: float, sample_period_s: float) -> Trace:
         a=col('acceleration_m_s2'),
         volume=col('volume_m3'),
         fluid_mass=col('fluid_mass_kg'),
+        thrust=col('thrust_n'),
+        drag=col('drag_n'),
         ledgers=ledgers,
         dt_s=model.dt_s,
         fault=fault,
@@ -419,7 +423,8 @@ def energy_budget(case: dict, trace: Trace, figures: dict, window: tuple) -> dic
 # a case
 
 
-def _scene(case: dict, extra: dict | None = None):
+def case_scene(case: dict, extra: dict | None = None):
+    """Return the case's scene with its overrides and then `extra` (a probe's) merged in."""
     overrides = merge(case.get('overrides') or {}, extra or {})
     try:
         return load_scene(case['scene'], overrides or None)
@@ -441,7 +446,7 @@ def refinement(case: dict, scene, values: dict, run: dict) -> list[dict]:
         runs = []
         for ov in levels:
             trace = run_trace(
-                _scene(case, ov), float(run['duration_s']), float(run['sample_period_s'])
+                case_scene(case, ov), float(run['duration_s']), float(run['sample_period_s'])
             )
             figures = figures_of(case, trace)[0]
             runs.append({'overrides': ov, 'fault': trace.fault, 'figures': figures})
@@ -475,7 +480,7 @@ def shell_case_convergence(case: dict, scene, values: dict, run: dict) -> dict:
 
     def figures_at(overrides: dict):
         trace = run_trace(
-            _scene(case, overrides), float(run['duration_s']), float(run['sample_period_s'])
+            case_scene(case, overrides), float(run['duration_s']), float(run['sample_period_s'])
         )
         return figures_of(case, trace)[0], trace.fault
 
@@ -504,7 +509,7 @@ def _flag_verdicts(result: dict) -> None:
 def run_case(case: dict, refine: bool = True, probes: bool = True) -> tuple[dict, Trace]:
     """Run one case: figures with verdicts, steady check, budget, refinement, probes."""
     run = case['run']
-    scene = _scene(case)
+    scene = case_scene(case)
     trace = run_trace(scene, float(run['duration_s']), float(run['sample_period_s']))
     values, window = figures_of(case, trace)
     rows = []
@@ -560,7 +565,7 @@ def run_case(case: dict, refine: bool = True, probes: bool = True) -> tuple[dict
     if probes:
         for probe in case.get('probes') or []:
             ptrace = run_trace(
-                _scene(case, probe['overrides']),
+                case_scene(case, probe['overrides']),
                 float(run['duration_s']),
                 float(run['sample_period_s']),
             )
@@ -924,7 +929,7 @@ def run_posthoc(path: Path, cases_dir: Path, log=print) -> list[dict]:
         log(f'post-hoc {case["id"]}/{_need(item, "id", where, str)} ...')
         run = case['run']
         trace = run_trace(
-            _scene(case, overrides), float(run['duration_s']), float(run['sample_period_s'])
+            case_scene(case, overrides), float(run['duration_s']), float(run['sample_period_s'])
         )
         values, window = figures_of(case, trace)
         out.append(
