@@ -34,8 +34,6 @@ from pulsejet_sim.studies import validation
 import yaml
 
 CASE = 'cable_robot_steady'
-MEASURED_MEAN_M_S, MEASURED_BURST_M_S = 0.135, 0.2
-DURATION_S, WINDOW_START_S, CYCLES = 40.0, 35.0, 8
 
 
 def variants() -> dict[str, dict]:
@@ -47,31 +45,29 @@ def variants() -> dict[str, dict]:
     return out
 
 
-def finer(overrides: dict) -> dict:
-    """Return the overrides at twice the case scene's elements and half its step."""
-    case = validation.load_case(validation.CASES_DIR / f'{CASE}.yaml')
-    scene = validation.case_scene(case, overrides)
+def finer(overrides: dict, run: dict) -> dict:
+    """Return the overrides at twice the run's elements and half its step."""
     return {
         **overrides,
-        'mesh': {'elements': 2 * int(scene.data['mesh']['elements'])},
-        'simulation': {'dt_s': scene.model.dt_s / 2},
+        'mesh': {'elements': 2 * run['elements']},
+        'simulation': {'dt_s': run['dt_s'] / 2},
     }
 
 
-def figures(overrides: dict) -> dict:
-    """Run the case's scene with `overrides`; return the window's speeds, impulse and mass."""
-    case = validation.load_case(validation.CASES_DIR / f'{CASE}.yaml')
+def figures(case: dict, overrides: dict) -> dict:
+    """Run the case's scene with `overrides` as the case runs it; return the window's figures."""
     scene = validation.case_scene(case, overrides)
-    trace = validation.run_trace(scene, DURATION_S, scene.model.dt_s)
+    trace = validation.run_trace(scene, float(case['run']['duration_s']), scene.model.dt_s)
     assert trace.fault is None, trace.fault
+    start, _, cycles = validation.window_of(case, scene, float(trace.t[-1]))
     t, speed, volume = trace.t, trace.v, trace.volume
     rho = float(scene.data['fluid']['density_kg_m3'])
     # the refill's ram force rho V' U (V' > 0: water drawn in), V' from the sampled volumes
     ram = rho * np.maximum(np.gradient(volume, t), 0.0) * speed
-    w = t >= WINDOW_START_S - 1e-9
+    w = t >= start - 1e-9
 
     def per_cycle(force):
-        return float(np.trapezoid(force[w], t[w])) / CYCLES
+        return float(np.trapezoid(force[w], t[w])) / cycles
 
     impulse, ram_impulse = per_cycle(trace.thrust), per_cycle(ram)
     body_drag = per_cycle(-trace.drag)
@@ -85,15 +81,17 @@ def figures(overrides: dict) -> dict:
         'ram': ram_impulse,
         'rest': impulse - body_drag - ram_impulse,
         'mass_min': body + rho * float(np.min(volume[w])),
+        'elements': int(scene.data['mesh']['elements']),
+        'dt_s': scene.model.dt_s,
     }
 
 
-def row(name: str, f: dict, fine: dict) -> str:
+def row(name: str, f: dict, fine: dict, measured: dict) -> str:
     """One table row: speeds, the impulses per cycle, the bound and the finer run's differences."""
     swing = f['max'] - f['min']
     bound = f['impulse'] / f['mass_min']
-    burst_needs = (MEASURED_BURST_M_S - MEASURED_MEAN_M_S) * f['mass_min']
-    scale = MEASURED_MEAN_M_S / f['mean']
+    burst_needs = (measured['burst_speed'] - measured['mean_speed']) * f['mass_min']
+    scale = measured['mean_speed'] / f['mean']
     mean_takes = (f['drag'] + f['rest']) * scale**2 + f['ram'] * scale
     rel = {k: (fine[k] - f[k]) / f[k] for k in ('mean', 'max', 'impulse')}
     return (
@@ -114,8 +112,12 @@ def main() -> int:
         'mN s | J_T the measured mean takes, mN s | finer: mean, max, J_T |',
         '|---|---|---|---|---|---|---|---|---|---|---|---|',
     ]
+    case = validation.load_case(validation.CASES_DIR / f'{CASE}.yaml')
+    measured = {f['id']: f['measured'] for f in case['figures']}
     for name, overrides in variants().items():
-        lines.append(row(name, figures(overrides), figures(finer(overrides))))
+        run = figures(case, overrides)
+        fine = figures(case, finer(overrides, run))
+        lines.append(row(name, run, fine, measured))
         print(lines[-1], flush=True)
     text = '\n'.join(
         [
